@@ -1,0 +1,143 @@
+"""Synthetic mirror rigs with exact ground truth -- a test tool.
+
+Used by the tests, the benchmarks and the sample-scene scripts. Two kinds of
+scene:
+
+* :func:`random_cube_points` + :func:`mirror_plane_from_angles`: the simulation
+  protocol of Lin (2003), section 6.2 -- random points in a 9000 x 18000 x 9000
+  cube 40000 units in front of the camera, a mirror tangent to a sphere around
+  the cube at a given longitude/latitude.
+* :func:`face_rig`: a face-sized marker layout (millimetres) between two mirrors
+  beside the cheeks, with per-view visibility from the surface normals.
+
+:func:`observe` projects a scene into the direct and mirrored views with
+Gaussian noise and optional rounding to the pixel grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import Camera
+from .mirror import reflect_points
+
+
+def mirror_plane_from_angles(longitude_deg: float, latitude_deg: float, centre, radius: float):
+    """The mirror tangent to the sphere ``|x - centre| = radius`` at the point of
+    the given longitude and latitude (section 6.2, figure 6.4).
+
+    Longitude is measured from the optical axis (+z) towards +x, latitude towards
+    +y. The normal faces the sphere centre, so ``c < 0``; at (45 deg, 0 deg) the
+    virtual camera's view direction is 90 deg from the real one. Returns
+    ``(normal (3,), d)`` with ``normal . x = d`` on the mirror."""
+    lon, lat = np.radians(longitude_deg), np.radians(latitude_deg)
+    t = np.array([np.cos(lat) * np.sin(lon), np.sin(lat), np.cos(lat) * np.cos(lon)])
+    centre = np.asarray(centre, dtype=float)
+    normal = -t
+    d = float(normal @ (centre + radius * t))
+    return normal, d
+
+
+def random_cube_points(n: int, rng: np.random.Generator, size=(9000.0, 18000.0, 9000.0),
+                       distance: float = 40000.0) -> np.ndarray:
+    """``n`` points uniform in an axis-aligned box of ``size`` (x, y, z) whose centre
+    lies ``distance`` along the optical axis (section 6.2)."""
+    size = np.asarray(size, dtype=float)
+    pts = (rng.random((n, 3)) - 0.5) * size
+    pts[:, 2] += distance
+    return pts
+
+
+def observe(points, planes, camera: Camera, noise_px: float = 0.0, rng=None, quantize: bool = False,
+            pixel_pitch: float = 1.0):
+    """Project ``points`` ``(N, 3)`` into the direct view and into each mirror of
+    ``planes`` (a sequence of ``(normal, d)``).
+
+    Gaussian noise of ``noise_px`` is added to every coordinate, then, with
+    ``quantize``, positions are rounded to the pixel grid (the CCD digitisation of
+    section 6.2; ``pixel_pitch`` rounds to multiples of a coarser pitch).
+    Returns ``direct_px (N, 2)``, ``mirror_px (K, N, 2)``."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    pts = np.asarray(points, dtype=float)
+    views = [pts] + [reflect_points(pts, n, d) for n, d in planes]
+    out = []
+    for v in views:
+        px = camera.project(v)
+        if noise_px > 0:
+            px = px + rng.normal(0.0, noise_px, px.shape)
+        if quantize:
+            px = np.round(px / pixel_pitch) * pixel_pitch
+        out.append(px)
+    return out[0], np.stack(out[1:]) if len(out) > 1 else np.zeros((0,) + out[0].shape)
+
+
+@dataclass
+class FaceRig:
+    """A synthetic two-mirror face rig (millimetres, OpenCV camera frame)."""
+
+    camera: Camera
+    points: np.ndarray  # (N, 3) marker positions
+    normals: np.ndarray  # (N, 3) outward surface normals
+    planes: list  # [(normal (3,), d)] for mirror 0 (image left) and mirror 1 (image right)
+    visible_direct: np.ndarray  # (N,)
+    visible_mirror: np.ndarray  # (K, N)
+
+
+def face_rig(n_markers: int = 150, seed: int = 0, image_size=(1280, 720), focal_px: float = 1400.0,
+             distance_mm: float = 600.0, mirror_longitude_deg: float = 75.0, mirror_radius_mm: float = 90.0,
+             grazing_deg: float = 80.0, dist=None) -> FaceRig:
+    """Markers on the front of a face-sized ellipsoid (semi-axes 75 x 100 x 90 mm)
+    ``distance_mm`` in front of the camera, with a mirror on each side tangent to a
+    sphere of ``mirror_radius_mm`` around the face at +-``mirror_longitude_deg``.
+
+    A marker is visible in a view when its surface faces that (real or virtual)
+    camera within ``grazing_deg`` and it projects inside the image. Mirror 0 is
+    the one that appears on the image's left (x < cx). ``dist`` adds OpenCV lens
+    distortion coefficients to the camera."""
+    rng = np.random.default_rng(seed)
+    w, h = image_size
+    camera = Camera.ideal(focal_px, (w, h))
+    if dist is not None:
+        camera = Camera(K=camera.K, dist=np.asarray(dist, dtype=float), image_size=(w, h))
+    semi = np.array([75.0, 100.0, 90.0])
+    centre = np.array([0.0, 0.0, distance_mm])
+    # Uniform directions on the camera-facing half (z < 0 relative to the centre),
+    # kept away from the back of the head.
+    dirs = rng.normal(size=(n_markers * 4, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs = dirs[dirs[:, 2] < -0.05][:n_markers]
+    pts = centre + dirs * semi
+    nrm = dirs / semi**2
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    planes = [
+        mirror_plane_from_angles(-mirror_longitude_deg, 0.0, centre, mirror_radius_mm),
+        mirror_plane_from_angles(+mirror_longitude_deg, 0.0, centre, mirror_radius_mm),
+    ]
+    cos_lim = np.cos(np.radians(grazing_deg))
+
+    def facing(points, normals, eye):
+        to_eye = eye - points
+        to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
+        return np.sum(to_eye * normals, axis=1) > cos_lim
+
+    vis_d = facing(pts, nrm, np.zeros(3)) & camera.contains(camera.project(pts))
+    vis_m = []
+    for n, d in planes:
+        eye = reflect_points(np.zeros(3), n, d)  # the virtual camera centre
+        ok = facing(pts, nrm, eye)
+        virt = reflect_points(pts, n, d)
+        vis_m.append(ok & camera.contains(camera.project(virt)) & (virt[:, 2] > 0))
+    vis_m = np.stack(vis_m)
+    # Make mirror 0 the one imaged on the left.
+    cx = camera.K[0, 2]
+    left = [np.nanmedian(camera.project(reflect_points(pts, n, d))[:, 0]) < cx for n, d in planes]
+    if not left[0] and left[1]:
+        planes = planes[::-1]
+        vis_m = vis_m[::-1]
+    return FaceRig(camera=camera, points=pts, normals=nrm, planes=planes, visible_direct=vis_d,
+                   visible_mirror=vis_m)
+
+
+__all__ = ["mirror_plane_from_angles", "random_cube_points", "observe", "FaceRig", "face_rig"]
