@@ -14,10 +14,18 @@ from pathlib import Path
 from .errors import InputError
 
 
+def _default_file_mode() -> int:
+    """The mode a plain ``open(path, "w")`` would give a new file (0666 minus umask)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def write_files_atomically(contents: dict) -> None:
     """Write ``{path: str | bytes}`` so that either every file is replaced by its new
     content or (on any error) none is touched and no temporary file is left."""
     temps = []
+    mode_bits = _default_file_mode()
     try:
         for path, data in contents.items():
             path = Path(path)
@@ -26,6 +34,7 @@ def write_files_atomically(contents: dict) -> None:
                 raise InputError(f"output folder {folder} does not exist")
             fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
             temps.append((tmp, path))
+            os.chmod(tmp, mode_bits)  # mkstemp creates 0600; give the file the usual umask-based mode
             mode = "wb" if isinstance(data, bytes) else "w"
             kwargs = {} if isinstance(data, bytes) else {"encoding": "utf-8", "newline": ""}
             with os.fdopen(fd, mode, **kwargs) as fh:

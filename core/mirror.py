@@ -395,18 +395,22 @@ def _depth_sign(p, pm, u) -> float:
     return -1.0 if np.nanmedian(z) > 0 else 1.0
 
 
-def _check_not_degenerate(p, pm, label: str = "mirror"):
-    """Reject point sets that cannot determine a plane: too few, or all on one
-    image line (then the normal is undetermined or arbitrarily noise-sensitive)."""
+def _check_not_degenerate(p, pm, focal_px: float = 1.0, label: str = "mirror", min_spread_px: float = 1.0):
+    """Reject point sets that cannot determine a plane: too few, or all on one image
+    line -- the RMS distance from the best-fitting line is under ``min_spread_px``
+    in the direct or the mirrored view (then the normal is undetermined or at the
+    mercy of noise)."""
     n = p.shape[0]
     if n < 3:
         raise DegenerateError(f"{label}: at least 3 correspondences are needed, got {n}")
     for pts, view in ((p, "direct"), (pm, "mirrored")):
         centred = pts - pts.mean(axis=0)
-        sv = np.linalg.svd(centred, compute_uv=False)
-        if sv[0] == 0 or sv[1] <= 1e-6 * sv[0]:
+        cov = centred.T @ centred / n
+        minor = np.sqrt(max(np.linalg.eigvalsh(cov)[0], 0.0)) * focal_px
+        if minor < min_spread_px:
             raise DegenerateError(
-                f"{label}: all {view} points lie on one image line; the mirror plane is undetermined"
+                f"{label}: all {view} points lie on one image line (spread {minor:.2g} px); "
+                "the mirror plane is undetermined"
             )
     sv = np.linalg.svd(correspondence_matrix(p, pm), compute_uv=False)
     if sv[1] <= 1e-9 * sv[0]:
@@ -444,7 +448,7 @@ def estimate_mirror_plane(
         raise InputError(f"{label}: point coordinates must be finite")
     p = camera.normalize(direct_px)
     pm = camera.normalize(mirror_px)
-    _check_not_degenerate(p, pm, label)
+    _check_not_degenerate(p, pm, camera.focal_px, label)
     n = p.shape[0]
     f = camera.focal_px
     iterations = 0

@@ -1,0 +1,176 @@
+"""``make bench``: speed of the mirror core and the section 6.2 simulations.
+
+    python -m benchmarks.run --out bench_results [--trials 100] [--workers 2] [--skip-simulation]
+
+Writes (atomically) into the output folder:
+
+* ``speed.json`` -- median microseconds per call (see benchmarks/speed.py);
+* ``simulation.csv`` -- experiment, setting, method, rms, median, failures, trials;
+* ``fig6_1_points.png`` ... ``fig6_4_orientation.png`` -- the four figures;
+* ``expected_error.csv`` -- Monte-Carlo check of eq. 3.26;
+* ``summary.md`` -- the tables quoted in the README.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from core.atomic import write_files_atomically
+
+from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
+from .speed import run_speed
+
+
+def _csv(rows, columns) -> str:
+    out = io.StringIO()
+    w = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items() if k in columns})
+    return out.getvalue()
+
+
+def _plot(rows, experiment) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    label, settings = EXPERIMENTS[experiment]
+    sel = [r for r in rows if r["experiment"] == experiment]
+    if experiment == "fig6_4_orientation":
+        fig, axes = plt.subplots(1, 4, figsize=(14, 3.6), sharey=True)
+        for ax, lon in zip(axes, (15, 30, 45, 60)):
+            for m in METHODS:
+                pts = [(int(r["setting"].split("/")[1]), r["rms"]) for r in sel
+                       if r["method"] == m and r["setting"].startswith(f"{lon}/")]
+                ax.plot(*zip(*pts), marker="o", ms=3, label=METHOD_LABELS[m])
+            ax.set_title(f"longitude {lon} deg")
+            ax.set_xlabel("latitude (deg)")
+            ax.set_yscale("log")
+            ax.grid(alpha=0.3)
+        axes[0].set_ylabel("RMS 3D error (units; 1 = 0.05 mm at 2 m)")
+        axes[-1].legend(fontsize=7)
+    else:
+        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        for m in METHODS:
+            xs = [float(r["setting"]) for r in sel if r["method"] == m]
+            ys = [r["rms"] for r in sel if r["method"] == m]
+            ax.plot(xs, ys, marker="o", ms=3, label=METHOD_LABELS[m])
+        ax.set_xlabel(label)
+        ax.set_ylabel("RMS 3D error (units; 1 = 0.05 mm at 2 m)")
+        ax.set_yscale("log")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle({"fig6_1_points": "Figure 6.1: error vs number of correspondences (1 px noise)",
+                  "fig6_2_noise": "Figure 6.2: error vs image noise (60 points)",
+                  "fig6_3_resolution": "Figure 6.3: error vs resolution (quantisation only, 60 points)",
+                  "fig6_4_orientation": "Figure 6.4: error vs mirror orientation (1 px noise, 60 points)"}[experiment],
+                 fontsize=10)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _summary(speed, rows, expected, trials, seconds) -> str:
+    lines = ["# MirrorCap benchmark results", "",
+             f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}, "
+             f"{trials} trials per simulation setting, simulations took {seconds:.0f} s.", ""]
+    if speed:
+        lines += ["## Speed (one frame, 300 markers, median of repeated runs)", "",
+                  "| operation | time |", "| --- | --- |"]
+        for k, v in speed.items():
+            if k.endswith("_us"):
+                lines.append(f"| {k[:-3].replace('_', ' ')} | {v:,.1f} us |")
+        lines.append("")
+    if rows:
+        lines += ["## Section 6.2 simulations: RMS 3D error (cube units; 1 unit = 0.05 mm at 2 m)", ""]
+        pick = {"fig6_1_points": [10, 30, 60, 100], "fig6_2_noise": [0.0, 1.0, 2.0, 3.0],
+                "fig6_3_resolution": [1 / 3, 0.5, 1.0], "fig6_4_orientation": ["15/0", "30/0", "45/0", "60/0",
+                                                                                 "45/-45", "45/45"]}
+        for exp, settings in pick.items():
+            label = EXPERIMENTS[exp][0]
+            lines += [f"### {exp} ({label})", "", "| setting | " + " | ".join(METHOD_LABELS[m] for m in METHODS)
+                      + " | (b)/(a) | OpenCV/(a) |", "|" + " --- |" * (len(METHODS) + 3)]
+            for s in settings:
+                key = s if isinstance(s, str) else s
+                vals = {r["method"]: r for r in rows if r["experiment"] == exp and
+                        (r["setting"] == key or (not isinstance(key, str) and not isinstance(r["setting"], str)
+                                                 and abs(float(r["setting"]) - key) < 1e-9))}
+                if not vals:
+                    continue
+                cells = [f"{vals[m]['rms']:.3g}" + (f" ({vals[m]['failures']} failed)" if vals[m]["failures"] else "")
+                         for m in METHODS]
+                a = vals["mirror"]["rms"]
+                ratio_b = vals["two_view_linear"]["rms"] / a if a > 0 else float("nan")
+                ratio_cv = vals["opencv"]["rms"] / a if a > 0 else float("nan")
+                name = f"{s:.3g}" if isinstance(s, float) else str(s)
+                lines.append(f"| {name} | " + " | ".join(cells) + f" | {ratio_b:.2f} | {ratio_cv:.2f} |")
+            lines.append("")
+    if expected:
+        lines += ["## Expected normal error (eq. 3.26) vs Monte Carlo (60 points, Gaussian noise)", "",
+                  "| noise (px) | predicted (deg) | Monte Carlo (deg) | MC / predicted | worst configuration |",
+                  "| --- | --- | --- | --- | --- |"]
+        for r in expected:
+            lines.append(f"| {r['sigma_px']:g} | {r['predicted_deg']:.4f} | {r['monte_carlo_deg']:.4f} | "
+                         f"{r['ratio']:.3f} | {r['worst_configuration_ratio']:.3f} |")
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.run", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="bench_results")
+    parser.add_argument("--trials", type=int, default=100)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--skip-simulation", action="store_true", help="speed only")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {}
+
+    print("speed ...", flush=True)
+    speed = run_speed()
+    files[out / "speed.json"] = json.dumps(speed, indent=2) + "\n"
+    for k, v in speed.items():
+        if k.endswith("_us"):
+            print(f"  {k[:-3]:40s} {v:10.1f} us")
+
+    rows, expected, seconds = [], [], 0.0
+    if not args.skip_simulation:
+        t0 = time.perf_counter()
+
+        def progress(done, total):
+            print(f"\r  simulations: {done}/{total} settings", end="", flush=True)
+
+        print(f"section 6.2 simulations, {args.trials} trials per setting ...", flush=True)
+        rows = run_simulations(trials=args.trials, workers=args.workers, progress=progress)
+        print()
+        expected = expected_error_check()
+        seconds = time.perf_counter() - t0
+        files[out / "simulation.csv"] = _csv(rows, ["experiment", "setting", "method", "rms", "median", "failures",
+                                                    "trials"])
+        files[out / "expected_error.csv"] = _csv(expected, list(expected[0]))
+        for exp in EXPERIMENTS:
+            files[out / f"{exp}.png"] = _plot(rows, exp)
+    summary = _summary(speed, rows, expected, args.trials, seconds)
+    files[out / "summary.md"] = summary
+    write_files_atomically(files)
+    print(summary)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

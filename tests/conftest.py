@@ -1,0 +1,44 @@
+"""Shared fixtures: synthetic scenes with exact truth."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from core import simulate as sim  # noqa: E402
+from core.camera import Camera  # noqa: E402
+
+SAMPLE = ROOT / "sample_scenes" / "mirror_demo"
+
+
+@pytest.fixture
+def paper_camera():
+    """The simulated CCD of section 6.2: 720 x 720 px, f = 1500 px."""
+    return Camera.ideal(1500.0, (720, 720))
+
+
+@pytest.fixture
+def cube_scene(paper_camera):
+    """60 random points of the section 6.2 protocol and a mirror at (45 deg, 0 deg)."""
+    rng = np.random.default_rng(11)
+    pts = sim.random_cube_points(60, rng)
+    normal, d = sim.mirror_plane_from_angles(45.0, 0.0, [0, 0, 40000.0], 12000.0)
+    return pts, normal, d
+
+
+@pytest.fixture
+def distorted_camera():
+    K = np.array([[1400.0, 0.0, 652.3], [0.0, 1395.0, 355.8], [0.0, 0.0, 1.0]])
+    return Camera(K=K, dist=np.array([-0.08, 0.03, 0.0005, -0.0003, 0.0]), image_size=(1280, 720))
+
+
+@pytest.fixture
+def face():
+    return sim.face_rig(n_markers=300, seed=3)
