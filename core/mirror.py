@@ -423,7 +423,7 @@ def estimate_mirror_plane(
     camera: Camera,
     *,
     robust: bool = True,
-    threshold_px: float = 1.0,
+    threshold_px: float = 2.0,
     confidence: float = 0.999,
     max_iterations: int = 20000,
     seed: int = 0,
@@ -453,8 +453,6 @@ def estimate_mirror_plane(
     f = camera.focal_px
     iterations = 0
     if robust:
-        if n < 3:
-            raise DegenerateError(f"{label}: RANSAC needs at least 3 correspondences, got {n}")
         rng = np.random.default_rng(seed)
         u, inliers, iterations = _ransac_normal(p, pm, threshold_px / f, confidence, max_iterations, rng)
         if u is None or inliers.sum() < 3:
@@ -495,8 +493,8 @@ def link_mirror_scales(p, pm, visible, normals, ds) -> tuple[np.ndarray, int]:
     Each mirror's plane is found only up to scale. For a marker seen in mirror 0
     and mirror ``k``, the depths computed with each mirror alone must agree; the
     median ratio over all such markers rescales ``d_k``. Returns the new ``ds``
-    and the number of shared markers used for the last linked mirror (0 when a
-    mirror shares none with mirror 0, which is then left unchanged)."""
+    and the smallest number of shared markers behind any link (0 when some mirror
+    shares none with mirror 0; that mirror's ``d`` is then left unchanged)."""
     normals = np.asarray(normals, dtype=float)
     ds = np.array(ds, dtype=float)
     shared_min = None
