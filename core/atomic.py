@@ -14,7 +14,7 @@ from pathlib import Path
 from .errors import InputError
 
 
-def _default_file_mode() -> int:
+def default_file_mode() -> int:
     """The mode a plain ``open(path, "w")`` would give a new file (0666 minus umask)."""
     umask = os.umask(0)
     os.umask(umask)
@@ -25,7 +25,7 @@ def write_files_atomically(contents: dict) -> None:
     """Write ``{path: str | bytes}`` so that either every file is replaced by its new
     content or (on any error) none is touched and no temporary file is left."""
     temps = []
-    mode_bits = _default_file_mode()
+    mode_bits = default_file_mode()
     try:
         for path, data in contents.items():
             path = Path(path)

@@ -4,6 +4,12 @@ Commands:
 
 ``mirrorcap reconstruct PAIRS.csv --camera CAMERA.json -o POINTS.csv [--known-length ID_A ID_B MM]``
     mirror planes + 3D points from one frame of correspondences.
+``mirrorcap calibrate IMAGES_OR_VIDEO --board SPEC -o CAMERA.json``
+    camera intrinsics and distortion from views of a chessboard or ChArUco board.
+``mirrorcap detect VIDEO [--camera CAMERA.json] [--colors COLORS.json] [--rig RIG.json] -o DETECTIONS.csv``
+    markers in every frame, in the direct view and both mirrors.
+``mirrorcap colors learn VIDEO --classes K -o COLORS.json``
+    colour classes learned from sample frames.
 ``mirrorcap demo [--out DIR]``
     the main job on the embedded sample.
 
@@ -61,6 +67,71 @@ def _cmd_reconstruct(args) -> int:
     return 0
 
 
+def _open(args):
+    from .video import open_source, parse_frame_range
+
+    source = open_source(args.source, fps=getattr(args, "fps", None))
+    start, end = parse_frame_range(getattr(args, "frames", None))
+    return source, start, end
+
+
+def _cmd_calibrate(args) -> int:
+    from .atomic import write_files_atomically
+    from .calibrate import Board, calibrate_camera
+
+    board = Board.parse(args.board)
+    source, _, _ = _open(args)
+    result = calibrate_camera(source, board, max_views=args.max_views, min_views=args.min_views,
+                              max_rms_px=args.max_rms)
+    write_files_atomically({Path(args.output): json.dumps(result.to_dict(), indent=2) + "\n"})
+    if not args.quiet:
+        K = result.camera.K
+        print(f"calibrated from {result.views_used} of {result.views_tried} views, RMS reprojection error "
+              f"{result.rms_px:.3f} px -> {args.output}")
+        print(f"  fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f}  "
+              f"dist {' '.join(f'{v:+.4f}' for v in result.camera.dist)}")
+    return 0
+
+
+def _cmd_detect(args) -> int:
+    from .camera import Camera
+    from .detect import run_detection
+    from .markers import ColorClasses, ExtractionSettings, load_rig_views
+
+    colors = ColorClasses.load(args.colors) if args.colors else ColorClasses.default()
+    layout = load_rig_views(args.rig) if args.rig else None
+    camera = Camera.load(args.camera) if args.camera else None
+    if args.threshold < 0 or args.threshold >= 255:
+        raise MirrorCapError("--threshold must be in 0..254")
+    if args.min_area < 1 or args.marker_diameter < 0:
+        raise MirrorCapError("--min-area must be at least 1 and --marker-diameter non-negative")
+    settings = ExtractionSettings(threshold=args.threshold, min_area=args.min_area,
+                                  marker_diameter_px=args.marker_diameter)
+    source, start, end = _open(args)
+    report = run_detection(source, args.output, colors=colors, settings=settings, layout=layout, camera=camera,
+                           start=start, end=end, step=args.step, progress=not args.quiet)
+    if not args.quiet:
+        c = report["counts"]
+        n = report["frames"]["processed"]
+        print(f"{n} frames -> {args.output}: per frame {c['direct'] / n:.1f} direct, {c['mirror0'] / n:.1f} mirror0, "
+              f"{c['mirror1'] / n:.1f} mirror1 ({report['frames_per_second']:.0f} frames/s)")
+    return 0
+
+
+def _cmd_colors_learn(args) -> int:
+    from .atomic import write_files_atomically
+    from .detect import learn_color_classes
+
+    source, start, end = _open(args)
+    names = [n.strip() for n in args.names.split(",")] if args.names else None
+    classes = learn_color_classes(source, args.classes, names=names, start=start, end=end, step=args.step,
+                                  threshold=args.threshold)
+    write_files_atomically({Path(args.output): json.dumps(classes.to_dict(), indent=2) + "\n"})
+    if not args.quiet:
+        print(f"{len(classes.names)} colour classes -> {args.output}: {', '.join(classes.names)}")
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from .demo import run_demo
 
@@ -94,6 +165,52 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--seed", type=int, default=0, help="random seed of RANSAC (default 0)")
     rec.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     rec.set_defaults(func=_cmd_reconstruct)
+
+    cal = sub.add_parser("calibrate", help="camera intrinsics from views of a calibration board",
+                         description="Calibrate the camera from a video or images of a chessboard or ChArUco board.")
+    cal.add_argument("source", help="video file, image folder or glob")
+    cal.add_argument("--board", required=True,
+                     help="chessboard:COLSxROWS:SQUARE_MM (inner corners) or "
+                          "charuco:COLSxROWS:SQUARE_MM:MARKER_MM[:DICT] (squares)")
+    cal.add_argument("-o", "--output", required=True, help="CAMERA.json to write")
+    cal.add_argument("--max-views", type=int, default=40, help="frames sampled evenly from the source (default 40)")
+    cal.add_argument("--min-views", type=int, default=6, help="fewest views with the board found (default 6)")
+    cal.add_argument("--max-rms", type=float, default=1.0, help="largest acceptable RMS reprojection error, px")
+    cal.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
+    cal.add_argument("-q", "--quiet", action="store_true")
+    cal.set_defaults(func=_cmd_calibrate)
+
+    det = sub.add_parser("detect", help="find the markers in every frame of a rig video",
+                         description="Marker extraction (threshold, colour 1-NN, connected components, merging, "
+                                     "specks removed, sub-pixel centres) in the direct view and both mirrors.")
+    det.add_argument("source", help="video file, image folder or glob")
+    det.add_argument("-o", "--output", required=True, help="DETECTIONS.csv to write (a .json report goes beside it)")
+    det.add_argument("--camera", help="CAMERA.json; its image size must match the video")
+    det.add_argument("--colors", help="COLORS.json colour classes (default: the four blacklight colours)")
+    det.add_argument("--rig", help="RIG.json with view rectangles (default: split at the two widest gaps)")
+    det.add_argument("--threshold", type=float, default=60.0, help="brightness threshold on max(R,G,B), 0..254")
+    det.add_argument("--min-area", type=int, default=4, help="smallest marker in pixels (default 4)")
+    det.add_argument("--marker-diameter", type=float, default=6.0,
+                     help="marker diameter in pixels; closer fragments of one colour merge (default 6)")
+    det.add_argument("--frames", help="START:END frame range (END exclusive)")
+    det.add_argument("--step", type=int, default=1, help="use every STEP-th frame")
+    det.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
+    det.add_argument("-q", "--quiet", action="store_true", help="no progress or summary")
+    det.set_defaults(func=_cmd_detect)
+
+    colors = sub.add_parser("colors", help="colour classes for marker labelling")
+    colors_sub = colors.add_subparsers(dest="colors_command", required=True, metavar="ACTION")
+    learn = colors_sub.add_parser("learn", help="learn colour classes from sample frames (k-means)")
+    learn.add_argument("source", help="video file, image folder or glob")
+    learn.add_argument("--classes", type=int, required=True, help="number of colour classes")
+    learn.add_argument("-o", "--output", required=True, help="COLORS.json to write")
+    learn.add_argument("--names", help="comma-separated class names, in hue order")
+    learn.add_argument("--frames", help="START:END frame range")
+    learn.add_argument("--step", type=int, default=1)
+    learn.add_argument("--threshold", type=float, default=60.0)
+    learn.add_argument("--fps", type=float)
+    learn.add_argument("-q", "--quiet", action="store_true")
+    learn.set_defaults(func=_cmd_colors_learn)
 
     demo = sub.add_parser("demo", help="run the main job on the embedded sample and print its accuracy")
     demo.add_argument("--out", default="out", help="folder for the demo's outputs (default out/)")

@@ -73,6 +73,25 @@ def observe(points, planes, camera: Camera, noise_px: float = 0.0, rng=None, qua
     return out[0], np.stack(out[1:]) if len(out) > 1 else np.zeros((0,) + out[0].shape)
 
 
+def visibility(camera: Camera, planes, points, normals, grazing_deg: float = 80.0) -> np.ndarray:
+    """``(1 + K, N)``: marker seen in the direct view and in each mirror -- its surface
+    faces that (real or virtual) camera within ``grazing_deg`` and it projects inside
+    the image."""
+    cos_lim = np.cos(np.radians(grazing_deg))
+
+    def facing(eye, pts):
+        to_eye = eye - pts
+        to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
+        return np.sum(to_eye * normals, axis=1) > cos_lim
+
+    out = [facing(np.zeros(3), points) & camera.contains(camera.project(points))]
+    for n, d in planes:
+        virt = reflect_points(points, n, d)
+        eye = reflect_points(np.zeros(3), n, d)  # the virtual camera centre
+        out.append(facing(eye, points) & (virt[:, 2] > 0) & camera.contains(camera.project(virt)))
+    return np.stack(out)
+
+
 @dataclass
 class FaceRig:
     """A synthetic two-mirror face rig (millimetres, OpenCV camera frame)."""
@@ -87,7 +106,7 @@ class FaceRig:
 
 def face_rig(n_markers: int = 150, seed: int = 0, image_size=(1280, 720), focal_px: float = 1400.0,
              distance_mm: float = 600.0, mirror_longitude_deg: float = 75.0, mirror_radius_mm: float = 90.0,
-             grazing_deg: float = 80.0, dist=None) -> FaceRig:
+             grazing_deg: float = 80.0, dist=None, layout: str = "random") -> FaceRig:
     """Markers on the front of a face-sized ellipsoid (semi-axes 75 x 100 x 90 mm)
     ``distance_mm`` in front of the camera, with a mirror on each side tangent to a
     sphere of ``mirror_radius_mm`` around the face at +-``mirror_longitude_deg``.
@@ -95,7 +114,9 @@ def face_rig(n_markers: int = 150, seed: int = 0, image_size=(1280, 720), focal_
     A marker is visible in a view when its surface faces that (real or virtual)
     camera within ``grazing_deg`` and it projects inside the image. Mirror 0 is
     the one that appears on the image's left (x < cx). ``dist`` adds OpenCV lens
-    distortion coefficients to the camera."""
+    distortion coefficients to the camera. ``layout="even"`` spaces the markers
+    evenly (a Fibonacci lattice on the front of the face, as markers are applied
+    in practice); ``"random"`` places them uniformly at random."""
     rng = np.random.default_rng(seed)
     w, h = image_size
     camera = Camera.ideal(focal_px, (w, h))
@@ -105,9 +126,23 @@ def face_rig(n_markers: int = 150, seed: int = 0, image_size=(1280, 720), focal_
     centre = np.array([0.0, 0.0, distance_mm])
     # Uniform directions on the camera-facing half (z < 0 relative to the centre),
     # kept away from the back of the head.
-    dirs = rng.normal(size=(n_markers * 4, 3))
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    dirs = dirs[dirs[:, 2] < -0.05][:n_markers]
+    if layout == "even":
+        # the kept cap z < -0.05 is 47.5 % of the sphere: grow the lattice until it holds n
+        m = int(n_markers / 0.475) - 2
+        while np.count_nonzero(1.0 - 2.0 * (np.arange(m) + 0.5) / m < -0.05) < n_markers:
+            m += 1
+        i = np.arange(m) + 0.5
+        zz = 1.0 - 2.0 * i / m
+        phi = i * np.pi * (3.0 - np.sqrt(5.0)) + rng.uniform(0, 2 * np.pi)
+        rr = np.sqrt(1.0 - zz * zz)
+        dirs = np.c_[rr * np.cos(phi), rr * np.sin(phi), zz]
+        dirs = dirs[dirs[:, 2] < -0.05][:n_markers]
+    elif layout == "random":
+        dirs = rng.normal(size=(n_markers * 4, 3))
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        dirs = dirs[dirs[:, 2] < -0.05][:n_markers]
+    else:
+        raise ValueError(f"layout must be 'even' or 'random', got {layout!r}")
     pts = centre + dirs * semi
     nrm = dirs / semi**2
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
@@ -115,21 +150,8 @@ def face_rig(n_markers: int = 150, seed: int = 0, image_size=(1280, 720), focal_
         mirror_plane_from_angles(-mirror_longitude_deg, 0.0, centre, mirror_radius_mm),
         mirror_plane_from_angles(+mirror_longitude_deg, 0.0, centre, mirror_radius_mm),
     ]
-    cos_lim = np.cos(np.radians(grazing_deg))
-
-    def facing(points, normals, eye):
-        to_eye = eye - points
-        to_eye /= np.linalg.norm(to_eye, axis=1, keepdims=True)
-        return np.sum(to_eye * normals, axis=1) > cos_lim
-
-    vis_d = facing(pts, nrm, np.zeros(3)) & camera.contains(camera.project(pts))
-    vis_m = []
-    for n, d in planes:
-        eye = reflect_points(np.zeros(3), n, d)  # the virtual camera centre
-        ok = facing(pts, nrm, eye)
-        virt = reflect_points(pts, n, d)
-        vis_m.append(ok & camera.contains(camera.project(virt)) & (virt[:, 2] > 0))
-    vis_m = np.stack(vis_m)
+    vis = visibility(camera, planes, pts, nrm, grazing_deg)
+    vis_d, vis_m = vis[0], vis[1:]
     # Make mirror 0 the one imaged on the left.
     cx = camera.K[0, 2]
     left = [np.nanmedian(camera.project(reflect_points(pts, n, d))[:, 0]) < cx for n, d in planes]

@@ -1,0 +1,198 @@
+"""Marker extraction (section 5.2), colour classes and the view split, against
+synthetic rig frames with exact truth."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from core import markers as mk
+from core.errors import InputError
+from core.render import RenderSettings, match_detections, render_rig_frame, rig_clip_frames
+from core.simulate import face_rig
+
+CLASS_RGB = np.array([s[0] for s in mk.DEFAULT_CLASSES.values()])
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return face_rig(n_markers=300, seed=3, layout="even")
+
+
+def _frame(rig, settings, seed=1):
+    rng = np.random.default_rng(seed)
+    color = rng.integers(0, 4, len(rig.points))
+    vis = np.vstack([rig.visible_direct, rig.visible_mirror])
+    return render_rig_frame(rig.camera, rig.planes, rig.points, color, CLASS_RGB, settings, rng, visible=vis)
+
+
+def _evaluate(rig, settings, seeds=(1, 2, 3), extraction=None):
+    ex = mk.MarkerExtractor(mk.ColorClasses.default(), extraction)
+    errs, color_ok, missed, visible, false, dets = [], [], 0, 0, 0, 0
+    for seed in seeds:
+        img, truth = _frame(rig, settings, seed)
+        det = ex(img)
+        view = mk.split_views_by_gaps(det.x, 12.0).assign(det.x, det.y)
+        pairs, miss, fal = match_detections(det.x, det.y, view, truth, max_px=3.0)
+        n = truth.visible.shape[1]
+        errs.append(np.c_[det.x, det.y][pairs[:, 0]] - truth.centres.reshape(-1, 2)[pairs[:, 1]])
+        color_ok.append(det.color[pairs[:, 0]] == truth.color[pairs[:, 1] % n])
+        missed += miss.sum()
+        visible += truth.visible.sum()
+        false += fal.sum()
+        dets += len(det)
+    e = np.concatenate(errs)
+    return {"rms": float(np.sqrt(np.mean(np.sum(e**2, axis=1)))), "color": float(np.concatenate(color_ok).mean()),
+            "missed": missed / visible, "false": false / dets, "mean_err": e.mean(axis=0)}
+
+
+def test_subpixel_centres_within_0_1_px_for_small_blobs(rig):
+    """3.3 px diameter dots (0.75 mm at 600 mm), blur, noise sigma 3 grey levels."""
+    small = RenderSettings(marker_radius_mm=0.75, noise_sigma=3.0, blur_sigma=0.6)
+    r = _evaluate(rig, small)
+    assert r["rms"] <= 0.1, r
+    assert np.all(np.abs(r["mean_err"]) < 0.03)  # no systematic bias
+    assert r["missed"] < 0.005 and r["false"] < 0.005
+
+
+def test_colour_classes_at_least_99_percent(rig):
+    r = _evaluate(rig, RenderSettings(noise_sigma=3.0, color_jitter=0.05))
+    assert r["color"] >= 0.99, r
+    assert r["rms"] <= 0.1
+
+
+def _grid_frame(comb_px, seed=0):
+    """A 12 x 8 grid of well-separated dots straight ahead of the camera (no mirrors)."""
+    from core.camera import Camera
+
+    cam = Camera.ideal(1400.0, (1280, 720))
+    gx, gy = np.meshgrid(np.linspace(-150, 150, 12), np.linspace(-90, 90, 8))
+    pts = np.c_[gx.ravel(), gy.ravel(), np.full(gx.size, 600.0)]
+    pts[:, :2] += np.random.default_rng(seed).uniform(-3, 3, (len(pts), 2))
+    return render_rig_frame(cam, [], pts, np.zeros(len(pts), int), CLASS_RGB,
+                            RenderSettings(comb_px=comb_px, noise_sigma=3.0), np.random.default_rng(seed))
+
+
+def test_interlace_fragments_are_merged():
+    """Fields 6 px apart on ~5.8 px dots: the rows of the two fields break apart."""
+    img, truth = _grid_frame(comb_px=6)
+    merged = mk.extract_markers(img, mk.ColorClasses.default())
+    unmerged = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(marker_diameter_px=0.0))
+    assert len(unmerged) > 2 * truth.visible.sum()  # without merging, fragments become markers
+    assert len(merged) == truth.visible.sum() == 96
+    pairs, missed, false = match_detections(merged.x, merged.y, np.zeros(len(merged), int), truth, max_px=1.0)
+    assert not missed.any() and not false.any()
+    err = np.c_[merged.x, merged.y][pairs[:, 0]] - truth.centres.reshape(-1, 2)[pairs[:, 1]]
+    assert np.sqrt(np.mean(np.sum(err**2, axis=1))) < 0.3  # the merged centre is the mean of the two fields
+
+
+def test_interlace_on_the_rig(rig):
+    r = _evaluate(rig, RenderSettings(comb_px=4, noise_sigma=3.0))
+    assert r["missed"] < 0.02 and r["false"] < 0.01, r
+
+
+def test_occlusion_is_missing_not_false(rig):
+    r = _evaluate(rig, RenderSettings(occlusion=0.2, noise_sigma=3.0))
+    assert r["missed"] < 0.005 and r["false"] < 0.005  # hidden dots are not expected, nothing invented
+
+
+def test_specks_are_removed():
+    img = np.zeros((100, 200, 3), np.uint8)
+    img[50, 50] = 255  # a hot pixel
+    img[20:22, 100:102] = 255  # 4 px: kept
+    img[70:73, 150:153] = (200, 110, 255)  # a 9 px pink marker (BGR)
+    det = mk.extract_markers(img, mk.ColorClasses.default())
+    assert len(det) == 2
+    assert sorted(det.area.tolist()) == [4, 9]
+    pink = det.color[np.argmax(det.area)]
+    assert mk.ColorClasses.default().names[pink] == "pink"
+    assert det.x[np.argmax(det.area)] == pytest.approx(151.0) and det.y[np.argmax(det.area)] == pytest.approx(71.0)
+
+
+def test_weighted_centroid_is_subpixel():
+    """A symmetric blob whose true centre is between pixels."""
+    yy, xx = np.mgrid[0:40, 0:40]
+    cx, cy = 20.3, 17.8
+    blob = 200 * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * 1.2**2))
+    img = np.repeat(np.clip(blob, 0, 255).astype(np.uint8)[..., None], 3, axis=2)
+    det = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(threshold=20))
+    assert len(det) == 1
+    assert det.x[0] == pytest.approx(cx, abs=0.03) and det.y[0] == pytest.approx(cy, abs=0.03)
+
+
+def test_empty_and_bad_frames():
+    det = mk.extract_markers(np.zeros((50, 60, 3), np.uint8), mk.ColorClasses.default())
+    assert len(det) == 0 and det.rgb.shape == (0, 3)
+    with pytest.raises(InputError):
+        mk.extract_markers(np.zeros((50, 60), np.uint8), mk.ColorClasses.default())
+
+
+def test_classify_is_1nn_in_normalised_rgb():
+    classes = mk.ColorClasses.default()
+    rng = np.random.default_rng(0)
+    rgb = rng.uniform(1, 255, (500, 3))
+    n = rgb / rgb.sum(1, keepdims=True)
+    brute = classes.labels[np.argmin(((n[:, None] - classes.samples[None]) ** 2).sum(2), axis=1)]
+    assert np.array_equal(classes.classify(rgb), brute)
+    # scale invariance: a dimmer marker has the same class
+    assert np.array_equal(classes.classify(rgb * 0.3), classes.classify(rgb))
+
+
+def test_colour_file_round_trip_and_errors(tmp_path):
+    path = tmp_path / "colors.json"
+    path.write_text(json.dumps(mk.ColorClasses.default().to_dict()))
+    loaded = mk.ColorClasses.load(path)
+    assert loaded.names == mk.ColorClasses.default().names
+    assert np.allclose(loaded.samples, mk.ColorClasses.default().samples, atol=1e-4)
+    for text, message in [("{", "not valid JSON"), ('{"classes": []}', "no colour classes"),
+                          ('{"classes": [{"name": "a"}]}', "expected"),
+                          ('{"classes": [{"name": "a", "samples": [[-1, 0, 0]]}]}', "non-negative"),
+                          ('{"classes": [{"name": "a", "samples": [[1, 0, 0]]}, {"name": "a", "samples": [[0, 1, 0]]}]}',
+                           "unique")]:
+        path.write_text(text)
+        with pytest.raises(InputError, match=message):
+            mk.ColorClasses.load(path)
+    with pytest.raises(InputError, match="cannot read"):
+        mk.ColorClasses.load(tmp_path / "nope.json")
+
+
+def test_view_split_by_gaps_and_rig_file(rig, tmp_path):
+    img, truth = _frame(rig, RenderSettings())
+    det = mk.extract_markers(img, mk.ColorClasses.default())
+    layout = mk.split_views_by_gaps(det.x, 12.0)
+    view = layout.assign(det.x, det.y)
+    pairs, _, _ = match_detections(det.x, det.y, view, truth, max_px=3.0)
+    assert len(pairs) >= 0.99 * truth.visible.sum()
+    # every detection is assigned the view of its nearest true dot
+    flat = np.flatnonzero(truth.visible.ravel())
+    near = flat[np.argmin(np.linalg.norm(np.c_[det.x, det.y][:, None] - truth.centres.reshape(-1, 2)[flat][None],
+                                         axis=2), axis=1)]
+    assert np.array_equal(near // truth.visible.shape[1], view)
+    b0, b1 = layout.boundaries
+    rig_file = tmp_path / "rig.json"
+    rig_file.write_text(json.dumps({"views": {"mirror0": [0, 0, b0, 720], "direct": [b0, 0, b1, 720],
+                                              "mirror1": [b1, 0, 1280, 720]}}))
+    from_file = mk.load_rig_views(rig_file).assign(det.x, det.y)
+    assert np.array_equal(from_file, view)
+    partial = tmp_path / "partial.json"
+    partial.write_text(json.dumps({"views": {"direct": [b0, 0, b1, 720]}}))
+    assert set(mk.load_rig_views(partial).assign(det.x, det.y).tolist()) == {-1, 0}
+    with pytest.raises(InputError, match="no clear gap"):
+        mk.split_views_by_gaps(np.linspace(0, 1000, 500), 12.0)
+    for text, message in [("[]", "needs"), ('{"views": {"direct": [0, 0, 10]}}', r"\[x0, y0, x1, y1\]"),
+                          ('{"views": {"direct": [0, 0, 10, 10], "mirror2": [0, 0, 1, 1]}}', "unknown view"),
+                          ('{"views": {"direct": [10, 0, 5, 10]}}', "empty rectangle")]:
+        rig_file.write_text(text)
+        with pytest.raises(InputError, match=message):
+            mk.load_rig_views(rig_file)
+
+
+def test_clip_frames_move_and_keep_truth(rig):
+    frames = list(rig_clip_frames(rig, 3, RenderSettings(), seed=0))
+    assert len(frames) == 3
+    (_, a, ta), (_, b, tb) = frames[0], frames[1]
+    assert a.shape == (720, 1280, 3) and a.dtype == np.uint8
+    moved = np.linalg.norm(ta.centres - tb.centres, axis=-1)[ta.visible & tb.visible]
+    assert moved.max() > 0.5  # the head turns between frames
