@@ -1,4 +1,5 @@
-"""Atomic output: nothing half-written on failure.
+"""File helpers: atomic output (nothing half-written on failure) and reading the
+project's JSON files with one clear error.
 
 Every output file is first written to a temporary file in the destination folder
 and renamed over the target only once all files of a result are complete.
@@ -7,6 +8,7 @@ and renamed over the target only once all files of a result are complete.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -48,3 +50,24 @@ def write_files_atomically(contents: dict) -> None:
         for tmp, _ in temps:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
+
+
+def read_text(path, kind: str) -> str:
+    """The text of ``path`` (UTF-8, a byte-order mark allowed); ``kind`` names the file
+    in errors ("camera file", "pairs file", ...)."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise InputError(f"cannot read {kind} {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{kind} {path} is not UTF-8 text") from None
+
+
+def read_json(path, kind: str):
+    """Parse the JSON file ``path``; ``kind`` names it in errors."""
+    text = read_text(path, kind)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{kind} {path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None

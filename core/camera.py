@@ -20,12 +20,11 @@ CAMERA.json format::
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
+from .atomic import read_json
 from .errors import InputError
 
 _DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
@@ -160,16 +159,7 @@ class Camera:
 
     @classmethod
     def load(cls, path) -> "Camera":
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise InputError(f"cannot read camera file {path}: {exc.strerror or exc}") from None
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(f"camera file {path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
-        return cls.from_dict(data, source=f"camera file {path}")
+        return cls.from_dict(read_json(path, "camera file"), source=f"camera file {path}")
 
     def contains(self, pixels, margin: float = 0.5) -> np.ndarray:
         """Boolean mask ``(...)``: pixel lies inside the image (with a margin in px)."""

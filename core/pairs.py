@@ -26,10 +26,10 @@ import csv
 import io
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from .atomic import read_text
 from .errors import InputError
 
 PAIR_COLUMNS = ("id", "mirror", "x", "y", "xm", "ym")
@@ -126,14 +126,7 @@ def parse_pairs(text: str, source: str = "PAIRS.csv") -> PairTable:
 
 
 def read_pairs(path) -> PairTable:
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise InputError(f"cannot read pairs file {path}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"pairs file {path} is not UTF-8 text") from None
-    return parse_pairs(text, source=str(path))
+    return parse_pairs(read_text(path, "pairs file"), source=str(path))
 
 
 def format_pairs(ids, direct_px, mirror_px, visible) -> str:

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from benchmarks.extraction import evaluate_extraction
 from core import markers as mk
 from core.errors import InputError
 from core.render import RenderSettings, match_detections, render_rig_frame, rig_clip_frames
@@ -29,23 +30,8 @@ def _frame(rig, settings, seed=1):
 
 
 def _evaluate(rig, settings, seeds=(1, 2, 3), extraction=None):
-    ex = mk.MarkerExtractor(mk.ColorClasses.default(), extraction)
-    errs, color_ok, missed, visible, false, dets = [], [], 0, 0, 0, 0
-    for seed in seeds:
-        img, truth = _frame(rig, settings, seed)
-        det = ex(img)
-        view = mk.split_views_by_gaps(det.x, 12.0).assign(det.x, det.y)
-        pairs, miss, fal = match_detections(det.x, det.y, view, truth, max_px=3.0)
-        n = truth.visible.shape[1]
-        errs.append(np.c_[det.x, det.y][pairs[:, 0]] - truth.centres.reshape(-1, 2)[pairs[:, 1]])
-        color_ok.append(det.color[pairs[:, 0]] == truth.color[pairs[:, 1] % n])
-        missed += miss.sum()
-        visible += truth.visible.sum()
-        false += fal.sum()
-        dets += len(det)
-    e = np.concatenate(errs)
-    return {"rms": float(np.sqrt(np.mean(np.sum(e**2, axis=1)))), "color": float(np.concatenate(color_ok).mean()),
-            "missed": missed / visible, "false": false / dets, "mean_err": e.mean(axis=0)}
+    r = evaluate_extraction(rig, settings, seeds, extraction)
+    return {**r, "rms": r["rms_px"]}
 
 
 def test_subpixel_centres_within_0_1_px_for_small_blobs(rig):
