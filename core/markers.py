@@ -7,8 +7,9 @@ Per frame, vectorised over pixels and components (no per-marker Python loop):
 2. **connected components** -- 8-connected, OpenCV's ``connectedComponentsWithStats``;
 3. **colour class** -- 1-NN in normalised colour ``(R, G, B) / (R + G + B)`` against the
    class samples. The paper labels every pixel and groups same-label pixels; we
-   classify each component's intensity-weighted mean colour, which gives the same
-   label for a one-colour marker at a fraction of the cost;
+   classify each component's mean colour (normalised rgb does not depend on
+   brightness), which gives the same label for a one-colour marker at a fraction
+   of the cost;
 4. **merge** -- components of the same class whose centres are closer than the
    marker diameter are one marker (fragments from interlaced fields or broken
    labelling), merged with scipy's KD-tree and graph components;
@@ -127,7 +128,7 @@ class Detections:
     color: np.ndarray  # class index
     area: np.ndarray  # pixels
     intensity: np.ndarray  # mean max(R, G, B) over the marker's pixels
-    rgb: np.ndarray = None  # (n, 3) intensity-weighted mean colour, normalised to sum 1
+    rgb: np.ndarray = None  # (n, 3) mean colour, normalised to sum 1
 
     def __len__(self):
         return self.x.size
@@ -190,14 +191,14 @@ class MarkerExtractor:
         idx = np.flatnonzero(self._mask.view(np.bool_))
         ys, xs = np.divmod(idx, w)
         lab = labels[ys - y0, xs - x0].astype(np.intp)
-        val = self._value.ravel().take(idx).astype(np.float64)
-        bgr = frame_bgr.reshape(-1, 3).take(idx, axis=0).astype(np.float64)
-        wgt = val - t
+        wgt = self._value.ravel().take(idx) - float(t)  # intensity - threshold, > 0
+        b, g, r = (plane.ravel().take(idx) for plane in self._planes)
+        count = np.bincount(lab, None, n)
+        weight = np.bincount(lab, wgt, n)
         sums = np.stack([
-            np.bincount(lab, wgt, n), np.bincount(lab, wgt * xs, n), np.bincount(lab, wgt * ys, n),
-            np.bincount(lab, None, n), np.bincount(lab, val, n),
-            np.bincount(lab, wgt * bgr[:, 2], n), np.bincount(lab, wgt * bgr[:, 1], n),
-            np.bincount(lab, wgt * bgr[:, 0], n),
+            weight, np.bincount(lab, wgt * xs, n), np.bincount(lab, wgt * ys, n), count,
+            weight + t * count,  # sum of intensities, without another pass
+            np.bincount(lab, r, n), np.bincount(lab, g, n), np.bincount(lab, b, n),  # colour: plain sums
         ], axis=1)[1:]  # drop the background label
         cls = self.colors.classify(sums[:, 5:8])
         cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]

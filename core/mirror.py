@@ -206,6 +206,31 @@ def depths_from_planes(p, pm, normals, ds, visible=None):
     return z, zm
 
 
+def _points_one_mirror(p, pm, normal, d) -> np.ndarray:
+    """:func:`points_from_planes` for one mirror and every point visible, written out:
+    the 2x2 normal equations of eq. 3.11 by Cramer's rule, then eq. 3.12's average.
+    The common per-frame case (a tracked frame with a known plane)."""
+    a, b, c = (float(v) for v in np.asarray(normal, dtype=float).reshape(3))
+    d = float(np.asarray(d).reshape(-1)[0])
+    x, y = p[..., 0], p[..., 1]
+    xm, ym = pm[..., 0], pm[..., 1]
+    s = a * x + b * y + c  # u.p
+    sm = a * xm + b * ym + c  # u.p'
+    AA = x * x + y * y + 1.0
+    BB = xm * xm + ym * ym + 1.0
+    AB = 2.0 * s * sm - (x * xm + y * ym + 1.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = (2.0 * d) / (AA * BB - AB * AB)
+    z = k * (BB * s - AB * sm)
+    zm = k * (AA * sm - AB * s)
+    g = 2.0 * (zm * sm - d)  # reflecting z' p' back: m'' = z' p' - g u
+    out = np.empty(x.shape + (3,))
+    out[..., 0] = 0.5 * (z * x + zm * xm - g * a)
+    out[..., 1] = 0.5 * (z * y + zm * ym - g * b)
+    out[..., 2] = 0.5 * (z + zm - g * c)
+    return out
+
+
 def points_from_planes(p, pm, normals, ds, visible=None, return_views: bool = False):
     """3D marker positions from correspondences and known planes (eq. 3.10-3.12).
 
@@ -218,6 +243,12 @@ def points_from_planes(p, pm, normals, ds, visible=None, return_views: bool = Fa
     Shapes as :func:`depths_from_planes`; returns ``(..., N, 3)`` (NaN for points in
     no mirror), and with ``return_views`` also the direct estimates ``(..., N, 3)``
     and the reflected-back estimates ``(K, ..., N, 3)`` (NaN where unseen)."""
+    if visible is None and not return_views:
+        p_arr = np.asarray(p, dtype=float)
+        pm_arr = np.asarray(pm, dtype=float)
+        one = pm_arr if pm_arr.ndim == p_arr.ndim else (pm_arr[0] if pm_arr.shape[0] == 1 else None)
+        if one is not None and np.asarray(normals).size == 3:
+            return _points_one_mirror(p_arr, one, normals, ds)
     p, pm, (a, b, c, d), z, zm, sm = _solve_depths(p, pm, normals, ds, visible)
     x, y = p[..., 0], p[..., 1]
     g = 2.0 * (zm * sm - d)  # reflect z' p' back, component by component

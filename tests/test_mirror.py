@@ -397,3 +397,19 @@ def test_refinement_keeps_exact_solution_and_reduces_reprojection_error(face):
     err_after = np.sqrt(np.mean(np.sum((res.points - face.points) ** 2, axis=1)))
     assert err_after < err_before
     assert np.all(res.normals[:, 2] < 0)
+
+
+def test_single_mirror_fast_path_equals_general_solver(face):
+    """points_from_planes has a written-out path for one mirror with every point
+    visible; it must agree with the general K-mirror solver, for one frame and for a
+    batch of frames."""
+    normals, ds, _, _, _ = _face_setup(face)
+    frames = [_face_setup(face, noise=0.4, seed=s)[2:4] for s in range(3)]
+    p = np.stack([a for a, _ in frames])  # (F, N, 2)
+    pm = np.stack([b[0] for _, b in frames])[None]  # (1, F, N, 2)
+    fast = mr.points_from_planes(p, pm, normals[:1], ds[:1])
+    general, _, _ = mr.points_from_planes(p, pm, normals[:1], ds[:1], return_views=True)
+    masked = mr.points_from_planes(p, pm, normals[:1], ds[:1], visible=np.ones(pm.shape[:-1], bool))
+    assert fast.shape == (3, len(face.points), 3)
+    assert np.allclose(fast, general, rtol=1e-12, atol=1e-9) and np.allclose(fast, masked, rtol=1e-12, atol=1e-9)
+    assert np.allclose(mr.points_from_planes(p[0], pm[0, 0], normals[0], ds[:1]), fast[0], atol=1e-9)
