@@ -214,22 +214,16 @@ def rig_clip_frames(rig, n_frames: int, settings: RenderSettings = RenderSetting
     ``head_motion_deg``) about its centre; visibility per view is recomputed from the
     surface normals each frame. Colours cycle through ``class_rgb`` (default: the
     four blacklight classes)."""
-    import cv2
-
     from .markers import DEFAULT_CLASSES
-    from .simulate import visibility
+    from .simulate import rig_motion, visibility
 
     class_rgb = np.array([s[0] for s in DEFAULT_CLASSES.values()]) if class_rgb is None else np.asarray(class_rgb)
     rng = np.random.default_rng(seed)
     n = len(rig.points)
     color = np.arange(n) % len(class_rgb)
     rng.shuffle(color)
-    centre = rig.points.mean(axis=0)
     for f in range(n_frames):
-        ang = head_motion_deg * np.sin(2 * np.pi * f / max(n_frames, 2)) * np.array([0.3, 1.0, 0.2])
-        R = cv2.Rodrigues(np.radians(ang))[0]
-        pts = (rig.points - centre) @ R.T + centre
-        nrm = rig.normals @ R.T
+        pts, nrm = rig_motion(rig, f, n_frames, head_motion_deg)
         vis = visibility(rig.camera, rig.planes, pts, nrm)
         img, truth = render_rig_frame(rig.camera, rig.planes, pts, color, class_rgb, settings, rng, visible=vis)
         yield f, img, truth

@@ -163,3 +163,64 @@ def face_rig(n_markers: int = 150, seed: int = 0, image_size=(1280, 720), focal_
 
 
 __all__ = ["mirror_plane_from_angles", "random_cube_points", "observe", "FaceRig", "face_rig"]
+
+
+@dataclass
+class FrameDetections:
+    """One frame of marker detections per view, as the extractor reports them
+    (pixels, colour-class index), with the true marker id of each (-1: false blob)."""
+
+    direct: np.ndarray  # (n, 2)
+    direct_color: np.ndarray  # (n,)
+    direct_id: np.ndarray  # (n,)
+    mirror: list  # K arrays (m_k, 2)
+    mirror_color: list  # K arrays (m_k,)
+    mirror_id: list  # K arrays (m_k,)
+
+
+def rig_motion(rig: FaceRig, frame: int, n_frames: int, head_motion_deg: float = 3.0):
+    """Marker positions and normals of ``rig`` at ``frame``: the head turns gently (a
+    sinusoid of ``head_motion_deg``) about the face centre."""
+    import cv2
+
+    ang = head_motion_deg * np.sin(2 * np.pi * frame / max(n_frames, 2)) * np.array([0.3, 1.0, 0.2])
+    R = cv2.Rodrigues(np.radians(ang))[0]
+    centre = rig.points.mean(axis=0)
+    return (rig.points - centre) @ R.T + centre, rig.normals @ R.T
+
+
+def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_colors: int = 4, seed: int = 0,
+                         head_motion_deg: float = 3.0, missing: float = 0.0, false_blobs: float = 0.0):
+    """Per-frame detections of ``rig`` under gentle head motion, without rendering:
+    visible markers projected into each view with Gaussian noise, in shuffled order.
+    ``missing`` drops that fraction of detections; ``false_blobs`` adds that many
+    spurious blobs per true one. Returns ``(colors (N,), [FrameDetections])``."""
+    rng = np.random.default_rng(seed)
+    n = len(rig.points)
+    colors = np.arange(n) % n_colors
+    rng.shuffle(colors)
+    frames = []
+    w, h = rig.camera.image_size
+
+    def view(px, ids):
+        keep = rng.random(len(ids)) >= missing
+        px, ids = px[keep], ids[keep]
+        n_false = int(round(false_blobs * len(ids)))
+        if n_false and len(px):
+            lo, hi = px.min(axis=0), px.max(axis=0)
+            px = np.vstack([px, rng.uniform(lo, hi, (n_false, 2))])
+            ids = np.concatenate([ids, -np.ones(n_false, int)])
+        px = px + rng.normal(0.0, noise_px, px.shape)
+        order = rng.permutation(len(ids))
+        col = np.where(ids >= 0, colors[np.maximum(ids, 0)], rng.integers(0, n_colors, len(ids)))
+        return px[order], col[order], ids[order]
+
+    for f in range(n_frames):
+        pts, nrm = rig_motion(rig, f, n_frames, head_motion_deg)
+        vis = visibility(rig.camera, rig.planes, pts, nrm)
+        ids = np.arange(n)
+        d = view(rig.camera.project(pts[vis[0]]), ids[vis[0]])
+        ms = [view(rig.camera.project(reflect_points(pts[vis[1 + k]], *rig.planes[k])), ids[vis[1 + k]])
+              for k in range(len(rig.planes))]
+        frames.append(FrameDetections(d[0], d[1], d[2], [m[0] for m in ms], [m[1] for m in ms], [m[2] for m in ms]))
+    return colors, frames
