@@ -8,6 +8,8 @@ Commands:
     camera intrinsics and distortion from views of a chessboard or ChArUco board.
 ``mirrorcap detect VIDEO [--camera CAMERA.json] [--colors COLORS.json] [--rig RIG.json] -o DETECTIONS.csv``
     markers in every frame, in the direct view and both mirrors.
+``mirrorcap mirrors VIDEO --camera CAMERA.json --board charuco:... -o MIRRORS.json``
+    mirror planes (in mm) from a ChArUco board seen directly and in both mirrors.
 ``mirrorcap colors learn VIDEO --classes K -o COLORS.json``
     colour classes learned from sample frames.
 ``mirrorcap demo [--out DIR]``
@@ -118,6 +120,31 @@ def _cmd_detect(args) -> int:
     return 0
 
 
+def _cmd_mirrors(args) -> int:
+    from .atomic import write_files_atomically
+    from .boardcal import calibrate_mirrors_from_board, write_mirrors_json
+    from .calibrate import Board
+    from .camera import Camera
+    from .markers import load_rig_views
+
+    board = Board.parse(args.board)
+    camera = Camera.load(args.camera)
+    layout = load_rig_views(args.rig) if args.rig else None
+    source, start, end = _open(args)
+    if camera.image_size != source.size:
+        raise MirrorCapError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but "
+                             f"{source.path} is {source.size[0]}x{source.size[1]}")
+    frames = (img for _, img in source.frames(start, end, args.step))
+    result = calibrate_mirrors_from_board(frames, camera, board, layout=layout, threshold_px=args.threshold)
+    write_files_atomically({Path(args.output): write_mirrors_json(result, board)})
+    if not args.quiet:
+        print(f"mirror planes from {result.frames_used} frames -> {args.output}")
+        for k, pl in enumerate(result.planes):
+            print(f"  mirror {k}: normal ({pl.normal[0]:+.5f}, {pl.normal[1]:+.5f}, {pl.normal[2]:+.5f}) "
+                  f"d {pl.d:.2f} mm  corners {pl.n_inliers}/{pl.inliers.size}  noise {pl.noise_px:.3f} px")
+    return 0
+
+
 def _cmd_colors_learn(args) -> int:
     from .atomic import write_files_atomically
     from .detect import learn_color_classes
@@ -197,6 +224,21 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
     det.add_argument("-q", "--quiet", action="store_true", help="no progress or summary")
     det.set_defaults(func=_cmd_detect)
+
+    mir = sub.add_parser("mirrors", help="mirror planes in mm from a ChArUco board seen in all three views",
+                         description="Detect a ChArUco board directly and (flipped) in both mirrors, estimate each "
+                                     "mirror plane (eq. 3.8 with RANSAC) and fix the scale from the board's size.")
+    mir.add_argument("source", help="video file, image folder or glob of the board in the rig")
+    mir.add_argument("--camera", required=True, help="CAMERA.json")
+    mir.add_argument("--board", required=True, help="charuco:COLSxROWS:SQUARE_MM:MARKER_MM[:DICT]")
+    mir.add_argument("-o", "--output", required=True, help="MIRRORS.json to write")
+    mir.add_argument("--rig", help="RIG.json view rectangles (default: the image's thirds)")
+    mir.add_argument("--frames", help="START:END frame range")
+    mir.add_argument("--step", type=int, default=1)
+    mir.add_argument("--threshold", type=float, default=2.0, help="RANSAC threshold in pixels (default 2)")
+    mir.add_argument("--fps", type=float)
+    mir.add_argument("-q", "--quiet", action="store_true")
+    mir.set_defaults(func=_cmd_mirrors)
 
     colors = sub.add_parser("colors", help="colour classes for marker labelling")
     colors_sub = colors.add_subparsers(dest="colors_command", required=True, metavar="ACTION")

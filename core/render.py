@@ -227,3 +227,34 @@ def rig_clip_frames(rig, n_frames: int, settings: RenderSettings = RenderSetting
         vis = visibility(rig.camera, rig.planes, pts, nrm)
         img, truth = render_rig_frame(rig.camera, rig.planes, pts, color, class_rgb, settings, rng, visible=vis)
         yield f, img, truth
+
+
+def render_board_in_rig(camera: Camera, planes, board, n_frames: int, rng=None, distance_mm: float = 600.0,
+                        noise_sigma: float = 1.0):
+    """A board held where the face would be, turning (yaw sweeps +-35 deg), seen
+    directly and in each mirror. The mirror images are drawn from the reflected
+    board pose (a reflected plane is still imaged by a homography). Returns a list
+    of 8-bit BGR frames (a dark room, the board lit)."""
+    import cv2
+
+    rng = np.random.default_rng(0) if rng is None else rng
+    tex, S = board_texture(board)
+    w, h = camera.image_size
+    centre = np.array([board.cols * board.square_mm / 2, board.rows * board.square_mm / 2, 0])
+    frames = []
+    for f in range(n_frames):
+        yaw = 35.0 * np.sin(2 * np.pi * f / max(n_frames, 2))
+        R = _rotation(rng.uniform(-10, 10), yaw, rng.uniform(-8, 8))
+        t = np.array([rng.uniform(-15, 15), rng.uniform(-15, 15), distance_mm]) - R @ centre
+        views = [(R, t)]
+        for n, d in planes:
+            H = np.eye(3) - 2.0 * np.outer(n, n)
+            views.append((H @ R, H @ t + 2.0 * d * n))
+        img = np.zeros((h, w, 3), np.float64)
+        for Rv, tv in views:
+            Hb = camera.K @ np.c_[Rv[:, :2], tv] @ np.linalg.inv(S)
+            warped = cv2.warpPerspective(tex, Hb, (w, h), flags=cv2.INTER_LINEAR, borderValue=(0, 0, 0))
+            img = np.maximum(img, warped)
+        img = cv2.GaussianBlur(img, (0, 0), 0.6)
+        frames.append(np.clip(img + rng.normal(0, noise_sigma, img.shape), 0, 255).astype(np.uint8))
+    return frames
