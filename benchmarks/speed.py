@@ -1,7 +1,8 @@
 """Speed of the mirror core on one frame (300 markers).
 
-Each figure is the median of repeated timed runs (``time.perf_counter``), after a
-warm-up, on one process. "kernel" timings take normalised coordinates (what the
+Each operation is timed over repeated runs (``time.perf_counter``) after a warm-up,
+on one process; ``<name>_us`` is the fastest run (the ``timeit`` convention: on a
+shared VM noise only ever adds time) and ``<name>_median_us`` the median. "kernel" timings take normalised coordinates (what the
 tracker calls per frame once detections are undistorted); "pixels" timings
 include the conversion from pixels through the camera.
 """
@@ -17,7 +18,8 @@ from core import simulate as sim
 from core.camera import Camera
 
 
-def _median_time(fn, repeat: int, inner: int = 1) -> float:
+def _times(fn, repeat: int, inner: int = 1) -> tuple[float, float]:
+    """(fastest, median) seconds per call over ``repeat`` runs of ``inner`` calls."""
     fn()
     times = []
     for _ in range(repeat):
@@ -25,7 +27,7 @@ def _median_time(fn, repeat: int, inner: int = 1) -> float:
         for _ in range(inner):
             fn()
         times.append((time.perf_counter() - t0) / inner)
-    return float(np.median(times))
+    return float(np.min(times)), float(np.median(times))
 
 
 def run_speed(n_points: int = 300, repeat: int = 200) -> dict:
@@ -70,6 +72,8 @@ def run_speed(n_points: int = 300, repeat: int = 200) -> dict:
     for name, fn in cases.items():
         r = max(20, repeat // 5) if name in slow else repeat
         inner = 1 if name in slow else 20
-        out[name + "_us"] = _median_time(fn, r, inner) * 1e6
+        best, median = _times(fn, r, inner)
+        out[name + "_us"] = best * 1e6
+        out[name + "_median_us"] = median * 1e6
     out["n_points"] = n_points
     return out

@@ -135,7 +135,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
                                                det.intensity[ok], color_names=colors.names))
                 t_write += time.perf_counter() - t0
 
-            for n, frame in source.frames(start, end, step):
+            for n, frame in source.frames(start, end, step, prefetch=4):
                 t0 = time.perf_counter()
                 det = extractor(frame)
                 t_extract += time.perf_counter() - t0

@@ -79,16 +79,26 @@ class VideoSource:
     size: tuple[int, int]  # (width, height)
     files: list | None = None
 
-    def frames(self, start: int = 0, end: int | None = None, step: int = 1):
-        """Yield ``(frame_number, bgr_image)`` for ``start <= n < end`` every ``step``."""
-        import cv2
+    def frames(self, start: int = 0, end: int | None = None, step: int = 1, prefetch: int = 0):
+        """Yield ``(frame_number, bgr_image)`` for ``start <= n < end`` every ``step``.
 
+        ``prefetch > 0`` decodes in a background thread, at most ``prefetch`` frames
+        ahead (OpenCV releases the GIL while decoding, so decoding overlaps the
+        caller's work on another core; memory stays bounded)."""
         if step < 1:
             raise InputError("frame step must be at least 1")
         end = self.frame_count if end is None else min(end, self.frame_count)
         if start >= end:
             raise InputError(f"frame range {start}:{end} selects no frame of {self.path} "
                              f"({self.frame_count} frames)")
+        if prefetch <= 0:
+            yield from self._read(start, end, step)
+            return
+        yield from _prefetched(self._read(start, end, step), prefetch)
+
+    def _read(self, start: int, end: int, step: int):
+        import cv2
+
         if self.kind == "images":
             for n in range(start, end, step):
                 img = cv2.imread(self.files[n], cv2.IMREAD_UNCHANGED)
@@ -106,14 +116,56 @@ class VideoSource:
                 cap.set(cv2.CAP_PROP_POS_FRAMES, start)
             n = start
             while n < end:
-                ok, img = cap.read()
-                if not ok:
-                    break
                 if (n - start) % step == 0:
+                    ok, img = cap.read()
+                    if not ok:
+                        break
                     yield n, to_bgr8(img)
+                elif not cap.grab():  # skipped frames are not decoded
+                    break
                 n += 1
         finally:
             cap.release()
+
+
+def _prefetched(iterator, depth: int):
+    """Run ``iterator`` in a daemon thread, ``depth`` items ahead; re-raise its errors;
+    stop it when the consumer stops early."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def work():
+        try:
+            for item in iterator:
+                while not stop.is_set():
+                    try:
+                        q.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put(done)
+        except BaseException as exc:  # handed to the consumer
+            q.put(exc)
+
+    thread = threading.Thread(target=work, name="mirrorcap-decode", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = q.get()
+            if item is done:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        thread.join(timeout=5)
 
 
 def open_source(path, fps: float | None = None) -> VideoSource:

@@ -260,3 +260,26 @@ def test_colors_learn_recovers_the_classes(clip, capsys, tmp_path):
     assert np.mean([mapping[lab] == t for lab, t in zip(learned_label, true_label)]) > 0.99
     code, _, err = _run(["colors", "learn", root / "png", "--classes", "3", "--names", "a,b", "-o", out], capsys)
     assert code == 2 and "names given" in err
+
+
+def test_prefetch_yields_the_same_frames_and_propagates_errors(clip, tmp_path):
+    import threading
+
+    root, _ = clip
+    video = open_source(root / "clip.mp4")
+    plain = list(video.frames(1, 8, 3))
+    ahead = list(video.frames(1, 8, 3, prefetch=2))
+    assert [n for n, _ in plain] == [n for n, _ in ahead] == [1, 4, 7]
+    assert all(np.array_equal(a, b) for (_, a), (_, b) in zip(plain, ahead))
+    # an unreadable image in a sequence surfaces in the consumer, from the decode thread
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"{i}.png"), np.zeros((10, 10, 3), np.uint8))
+    seq = open_source(tmp_path)
+    (tmp_path / "1.png").write_bytes(b"broken")
+    with pytest.raises(InputError, match="cannot read image"):
+        list(seq.frames(prefetch=2))
+    # a consumer that stops early stops the decode thread
+    gen = video.frames(prefetch=1)
+    next(gen)
+    gen.close()
+    assert not any(t.name == "mirrorcap-decode" and t.is_alive() for t in threading.enumerate())
