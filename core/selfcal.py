@@ -136,7 +136,7 @@ def self_calibrate_mirror(frames, camera: Camera, mirror: int, *, threshold_px: 
     max_dy = 0.05 * h if max_dy_px is None else max_dy_px
     pools = [np.flatnonzero(np.abs(scoring.dy_px) <= max_dy), np.arange(len(scoring.dy_px))]
     rng = np.random.default_rng(seed)
-    best_cost, best_u, done = np.inf, None, 0
+    best_cost, best_u, best_inliers, done = np.inf, None, 0, 0
     n_direct = len(scorer.d_starts)
     for pool in pools:
         if pool.size < 2:
@@ -159,11 +159,11 @@ def self_calibrate_mirror(frames, camera: Camera, mirror: int, *, threshold_px: 
             cost, inl = scorer.cost(u)
             k = int(np.argmin(cost))
             if cost[k] < best_cost:
-                best_cost, best_u = cost[k], u[k]
+                best_cost, best_u, best_inliers = cost[k], u[k], int(inl[k])
                 w = min(inl[k] / max(pool.size, 1), 1.0)  # chance that a sampled candidate is a true pair
                 if w > 0:
                     needed = int(np.ceil(np.log(1 - confidence) / np.log(max(1 - w * w, 1e-12))))
-        if best_u is not None and scorer.cost(best_u[None])[1][0] >= 0.3 * n_direct / max(len(frames[:score_frames]), 1):
+        if best_u is not None and best_inliers >= 0.3 * n_direct / max(len(frames[:score_frames]), 1):
             break  # the restricted pool found a plane explaining many blobs: no fallback needed
     if best_u is None:
         raise DegenerateError(f"mirror {mirror}: no mirror plane hypothesis could be formed")
