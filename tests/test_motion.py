@@ -1,0 +1,121 @@
+"""Chapter 5 tracking building blocks: rigid fit, eq. 5.4 angles, the adaptive Kalman
+filter (eq. 4.1-4.2), false-tracking detection (eq. 5.6-5.7), conjecture (eq. 5.8)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from core.motion import (
+    ConstantVelocityKalman,
+    angles_zyx,
+    conjecture_motion,
+    false_tracking,
+    neighbours,
+    rigid_fit,
+    rotation_zyx,
+)
+from core.simulate import face_rig
+
+
+@pytest.fixture(scope="module")
+def face_field():
+    """A smooth expression-like motion field (mm) on 300 evenly spaced face markers."""
+    neutral = face_rig(n_markers=300, seed=3, layout="even").points
+    c = neutral.mean(axis=0)
+    motion = (5 * np.sin((neutral - c)[:, :1] / 40) * np.array([0, 1, 0.3])
+              + 3 * np.cos((neutral - c)[:, 1:2] / 50) * np.array([1, 0, 0]))
+    return neutral, motion
+
+
+def test_rigid_fit_is_exact_and_a_proper_rotation():
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(12, 3)) * 40
+    R = rotation_zyx(np.radians([6, -12, 4]))
+    t = np.array([3.0, -2.0, 10.0])
+    R_fit, t_fit = rigid_fit(A, A @ R.T + t)
+    assert np.allclose(R_fit, R, atol=1e-12) and np.allclose(t_fit, t, atol=1e-10)
+    flat = A.copy()
+    flat[:, 2] = 0  # coplanar points: the SVD could return a reflection
+    R_fit, _ = rigid_fit(flat, flat @ R.T + t)
+    assert np.linalg.det(R_fit) == pytest.approx(1.0) and np.allclose(R_fit, R, atol=1e-10)
+    w = np.ones(12)
+    w[0] = 0
+    B = A @ R.T + t
+    B[0] += 100  # an outlier with zero weight changes nothing
+    assert np.allclose(rigid_fit(A, B, weights=w)[0], R, atol=1e-12)
+
+
+def test_eq_5_4_angles_round_trip():
+    ang = np.random.default_rng(1).uniform(-np.radians(80), np.radians(80), (200, 3))
+    R = rotation_zyx(ang)
+    assert np.allclose(angles_zyx(R), ang, atol=1e-12)
+    assert np.allclose(R @ np.swapaxes(R, -1, -2), np.eye(3), atol=1e-12)
+    # R = Rz Ry Rx, as printed in eq. 5.4
+    rx, ry, rz = 0.1, -0.2, 0.3
+    Rx = np.array([[1, 0, 0], [0, np.cos(rx), -np.sin(rx)], [0, np.sin(rx), np.cos(rx)]])
+    Ry = np.array([[np.cos(ry), 0, np.sin(ry)], [0, 1, 0], [-np.sin(ry), 0, np.cos(ry)]])
+    Rz = np.array([[np.cos(rz), -np.sin(rz), 0], [np.sin(rz), np.cos(rz), 0], [0, 0, 1]])
+    assert np.allclose(rotation_zyx([rx, ry, rz]), Rz @ Ry @ Rx)
+
+
+def test_kalman_follows_constant_velocity_and_reduces_noise():
+    rng = np.random.default_rng(2)
+    start = rng.normal(size=(300, 3)) * 50
+    vel = rng.normal(size=(300, 3))
+    exact = ConstantVelocityKalman.start(start, accel_sigma=0.01)
+    noisy = ConstantVelocityKalman.start(start, accel_sigma=0.05, initial_sigma=0.3)
+    raw, filt = [], []
+    for f in range(1, 60):
+        exact.predict()
+        noisy.predict()
+        truth = start + vel * f
+        exact.update(truth, 1e-6)
+        meas = truth + rng.normal(0, 0.3, truth.shape)
+        out = noisy.update(meas, 0.3)
+        if f > 20:
+            raw.append(np.std(meas - truth))
+            filt.append(np.std(out - truth))
+    assert np.allclose(exact.position, start + vel * 59, atol=1e-4)
+    assert np.allclose(exact.velocity, vel, atol=1e-4)
+    assert np.mean(filt) < 0.7 * np.mean(raw)
+
+
+def test_kalman_missing_measurements_keep_the_prediction():
+    kf = ConstantVelocityKalman.start(np.zeros((2, 3)))
+    kf.velocity[:] = 1.0
+    pred = kf.predict().copy()
+    out = kf.update(np.full((2, 3), 100.0), 0.1, valid=np.array([False, True]))
+    assert np.allclose(out[0], pred[0]) and np.all(out[1] > 50)
+
+
+def test_false_tracking_neighbour_test(face_field):
+    neutral, motion = face_field
+    rng = np.random.default_rng(3)
+    idx, _ = neighbours(neutral, 25.0)
+    assert (idx >= 0).sum(axis=1).mean() > 6
+    bad = rng.random(len(neutral)) < 0.05
+    direction = rng.normal(size=(bad.sum(), 3))
+    measured = motion + rng.normal(0, 0.2, motion.shape)
+    measured[bad] += 5.0 * direction / np.linalg.norm(direction, axis=1, keepdims=True)  # 5 mm off
+    flagged, jf = false_tracking(measured, np.ones(len(neutral), bool), idx)
+    assert (flagged & bad).sum() >= 0.95 * bad.sum()
+    assert (flagged & ~bad).sum() <= 0.01 * (~bad).sum()
+    # markers without a measurement are not judged
+    valid = ~bad
+    flagged2, jf2 = false_tracking(measured, valid, idx)
+    assert not flagged2[bad].any() and np.all(np.isnan(jf2[bad]))
+
+
+def test_conjectured_motion_follows_the_neighbours(face_field):
+    neutral, motion = face_field
+    idx, dist = neighbours(neutral, 25.0)
+    missing = np.random.default_rng(4).random(len(neutral)) < 0.1
+    given = np.where(missing[:, None], np.nan, motion)
+    est, filled = conjecture_motion(given, ~missing, idx, dist)
+    assert filled.sum() >= 0.95 * missing.sum()
+    err = np.linalg.norm(est[filled] - motion[filled], axis=1)
+    assert err.max() < 1.0  # mm, for motions of ~4 mm
+    assert np.array_equal(est[~missing], motion[~missing])
+    isolated, filled = conjecture_motion(given, np.zeros(len(neutral), bool), idx, dist)
+    assert not filled.any() and np.all(np.isnan(isolated))
