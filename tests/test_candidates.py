@@ -1,0 +1,73 @@
+"""Per-frame tracker steps: 3D candidates via the band, one-to-one assignment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from core.candidates import assign_nearest, frame_candidates
+from core.simulate import face_rig, rig_motion, synthetic_detections
+
+
+@pytest.fixture(scope="module")
+def frame():
+    rig = face_rig(n_markers=300, seed=3, layout="even")
+    _, frames = synthetic_detections(rig, 5, noise_px=0.1, seed=1, missing=0.1, false_blobs=0.2)
+    truth, _ = rig_motion(rig, 2, 5)
+    return rig, frames[2], truth
+
+
+def _candidates(rig, f, **kw):
+    cam = rig.camera
+    normals = np.stack([n for n, _ in rig.planes])
+    ds = np.array([d for _, d in rig.planes])
+    return frame_candidates(cam.normalize(f.direct), f.direct_color, [cam.normalize(m) for m in f.mirror],
+                            f.mirror_color, normals, ds, cam.focal_px, **kw)
+
+
+def test_every_paired_marker_has_a_true_candidate(frame):
+    rig, f, truth = frame
+    c = _candidates(rig, f, band_px=1.0, depth_range=(400.0, 800.0))
+    visible = set(f.direct_id[f.direct_id >= 0]) & (set(f.mirror_id[0]) | set(f.mirror_id[1]))
+    best = {}
+    for k, i in enumerate(c.direct):
+        m = f.direct_id[i]
+        if m < 0:
+            continue
+        if all(c.mirror_blob[k, v] < 0 or f.mirror_id[v][c.mirror_blob[k, v]] == m for v in range(2)):
+            best[m] = min(best.get(m, np.inf), np.linalg.norm(c.points[k] - truth[m]))
+    assert visible <= set(best)
+    assert max(best.values()) < 0.5  # mm
+    assert 1.0 <= len(c.direct) / len(visible) <= 3.0  # the paper saw 1.2-2.3 candidates per marker
+    assert np.all((c.points[:, 2] >= 400) & (c.points[:, 2] <= 800))
+    fused = np.all(c.mirror_blob >= 0, axis=1)
+    assert fused.any()  # markers seen in both mirrors get fused candidates
+    assert np.all(c.residual_px <= 1.0)
+
+
+def test_a_narrow_depth_range_removes_candidates(frame):
+    rig, f, _ = frame
+    wide = _candidates(rig, f, band_px=1.0)
+    narrow = _candidates(rig, f, band_px=1.0, depth_range=(590.0, 600.0))
+    assert 0 < len(narrow.direct) < len(wide.direct)
+
+
+def test_assignment_is_one_to_one_and_gated():
+    rng = np.random.default_rng(0)
+    truth = rng.uniform(-80, 80, (300, 3)) + [0, 0, 600]
+    perm = rng.permutation(300)
+    distractors = truth + rng.normal(size=(300, 3)) * 3 + 8.0  # > gate away
+    cand = np.vstack([truth[perm], distractors])
+    pred = truth + rng.normal(0, 0.3, truth.shape)
+    a = assign_nearest(pred, cand, gate=4.0)
+    assert np.array_equal(a, np.argsort(perm))
+    # conflicts: two predictions on one candidate -> at most one gets it
+    pred2 = np.vstack([truth[:1], truth[:1] + 0.1])
+    a2 = assign_nearest(pred2, truth[:1], gate=4.0)
+    assert sorted(a2.tolist()) == [-1, 0]
+    # the gate, and unknown predictions
+    far = assign_nearest(truth[:3] + 10.0, truth[:3], gate=4.0)
+    assert np.all(far == -1)
+    nan = assign_nearest(np.full((2, 3), np.nan), truth[:3], gate=4.0)
+    assert np.all(nan == -1)
+    assert np.all(assign_nearest(truth[:3], np.zeros((0, 3)), 4.0) == -1)
