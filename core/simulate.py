@@ -189,8 +189,45 @@ def rig_motion(rig: FaceRig, frame: int, n_frames: int, head_motion_deg: float =
     return (rig.points - centre) @ R.T + centre, rig.normals @ R.T
 
 
+def rig_performance(rig: FaceRig, n_frames: int, head_motion_deg: float = 10.0, expression_mm: float = 5.0,
+                    seed: int = 0):
+    """A synthetic performance: smooth expression fields (mm, in the head's frame)
+    that rise and fall over the clip, on top of a head turning up to
+    ``head_motion_deg``. Markers on the upper half of the face (forehead) stay
+    rigid, as on a real face. Returns ``(points (F, N, 3), normals (F, N, 3),
+    rotations (F, 3, 3), translations (F, 3), neutral_motion (F, N, 3))`` -- the last
+    being the expression displacement of every marker in the head frame."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    centre = rig.points.mean(axis=0)
+    rel = rig.points - centre
+    lower = np.clip((rel[:, 1] + 20.0) / 60.0, 0.0, 1.0)  # 0 on the forehead, 1 around the mouth/jaw
+    fields = []
+    for _ in range(3):
+        fx, fy = rng.uniform(20, 60, 2)
+        direction = rng.normal(size=3)
+        direction /= np.linalg.norm(direction)
+        fields.append(np.sin(rel[:, :1] / fx + rng.uniform(0, 6)) * np.cos(rel[:, 1:2] / fy) * direction)
+    phases = rng.uniform(0, 2 * np.pi, 3)
+    pts, nrm, Rs, Ts, expr = [], [], [], [], []
+    for f in range(n_frames):
+        s = np.sin(2 * np.pi * f / max(n_frames, 2) * np.array([1.0, 1.7, 2.3]) + phases)
+        e = expression_mm * lower[:, None] * sum(si * fi for si, fi in zip(s, fields))
+        ang = head_motion_deg * np.sin(2 * np.pi * f / max(n_frames, 2) * np.array([1.0, 0.6, 0.8]))
+        R = cv2.Rodrigues(np.radians(ang * np.array([0.5, 1.0, 0.3])))[0]
+        T = centre - R @ centre
+        pts.append((rig.points + e) @ R.T + T)
+        nrm.append(rig.normals @ R.T)
+        Rs.append(R)
+        Ts.append(T)
+        expr.append(e)
+    return np.array(pts), np.array(nrm), np.array(Rs), np.array(Ts), np.array(expr)
+
+
 def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_colors: int = 4, seed: int = 0,
-                         head_motion_deg: float = 3.0, missing: float = 0.0, false_blobs: float = 0.0):
+                         head_motion_deg: float = 3.0, missing: float = 0.0, false_blobs: float = 0.0,
+                         performance=None):
     """Per-frame detections of ``rig`` under gentle head motion, without rendering:
     visible markers projected into each view with Gaussian noise, in shuffled order.
     ``missing`` drops that fraction of detections; ``false_blobs`` adds that many
@@ -207,16 +244,24 @@ def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_c
         px, ids = px[keep], ids[keep]
         n_false = int(round(false_blobs * len(ids)))
         if n_false and len(px):
+            from scipy.spatial import cKDTree
+
             lo, hi = px.min(axis=0), px.max(axis=0)
-            px = np.vstack([px, rng.uniform(lo, hi, (n_false, 2))])
-            ids = np.concatenate([ids, -np.ones(n_false, int)])
+            extra = rng.uniform(lo, hi, (4 * n_false, 2))
+            # a spurious blob on top of a marker would merge with it in extraction: keep 3 px away
+            extra = extra[cKDTree(px).query(extra)[0] > 3.0][:n_false]
+            px = np.vstack([px, extra])
+            ids = np.concatenate([ids, -np.ones(len(extra), int)])
         px = px + rng.normal(0.0, noise_px, px.shape)
         order = rng.permutation(len(ids))
         col = np.where(ids >= 0, colors[np.maximum(ids, 0)], rng.integers(0, n_colors, len(ids)))
         return px[order], col[order], ids[order]
 
     for f in range(n_frames):
-        pts, nrm = rig_motion(rig, f, n_frames, head_motion_deg)
+        if performance is None:
+            pts, nrm = rig_motion(rig, f, n_frames, head_motion_deg)
+        else:
+            pts, nrm = performance[0][f], performance[1][f]
         vis = visibility(rig.camera, rig.planes, pts, nrm)
         ids = np.arange(n)
         d = view(rig.camera.project(pts[vis[0]]), ids[vis[0]])

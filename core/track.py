@@ -1,0 +1,270 @@
+"""Detections over time -> labelled 3D marker trajectories with head motion separated
+(Lin 2003, section 5.3 and "the motion tracking procedure" at the end of chapter 5).
+
+Steps, per the procedure:
+
+1. (given) camera and mirror planes -- from ``core.selfcal`` or ``mirrorcap mirrors``;
+2. the neutral structure at the first frame: markers are direct-view 2D tracks paired
+   with mirror tracks over the first ``init_frames`` frames (``core.pairing``);
+3-4. per frame, 3D candidates from the band (``core.candidates``);
+5. head motion: a robust rigid fit of the neutral structure to the tracked markers
+   (iteratively reweighted, so expression motion counts little -- the idea of
+   weight-compensated motion estimation, seed 003 section 3.3), filtered by the
+   adaptive Kalman filter on the six pose parameters of eq. 5.4-5.5;
+6. markers predicted by their own Kalman filters (eq. 4.1-4.2) in the head frame,
+   assigned one-to-one to candidates within a gate; false tracking by the neighbour
+   test (eq. 5.6-5.7); conflicts (one 2D blob claimed twice) keep the marker closest
+   to its prediction;
+7. missing markers conjectured from their neighbours (eq. 5.8);
+8. the Kalman filters give the reported positions.
+
+Everything is vectorised over markers; the loop is over frames.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import Camera
+from .candidates import assign_nearest, frame_candidates
+from .errors import DegenerateError
+from .mirror import points_from_planes
+from .motion import (
+    ConstantVelocityKalman,
+    angles_zyx,
+    conjecture_motion,
+    false_tracking,
+    neighbours,
+    rigid_fit,
+    rotation_zyx,
+)
+from .pairing import pair_tracks, track_2d
+
+
+@dataclass
+class TrackSettings:
+    band_px: float = 1.0  # mirrored epipolar band half-width (about 3 sigma of the detections)
+    gate_mm: float = 3.0  # a marker's candidate must lie this close to its prediction
+    init_frames: int = 15  # frames used to pair direct and mirror tracks
+    neighbour_radius_mm: float = 25.0  # neighbours in the neutral face (eq. 5.6-5.8)
+    false_threshold: float = 3.0  # JF above this is false tracking (eq. 5.6)
+    measure_sigma_mm: float = 0.1  # measurement noise for the marker filters
+    conjecture_sigma_mm: float = 1.0  # conjectured positions are trusted less
+    accel_sigma_mm: float = 1.0  # velocity change per frame, marker filters
+    pose_accel_sigma: tuple = (0.01, 1.0)  # rotation (rad) and translation (mm) per frame
+    pose_measure_sigma: tuple = (0.0005, 0.05)
+    depth_margin_mm: float = 200.0  # candidates deeper/shallower than the neutral face +- this are dropped
+    rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
+
+
+@dataclass
+class TrackResult:
+    labels: list
+    points: np.ndarray  # (F, N, 3) camera frame; NaN where not reported
+    conjectured: np.ndarray  # (F, N)
+    camera_mask: np.ndarray  # (F, N) bit 0 direct, bit 1 mirror 0, bit 2 mirror 1; 0 when conjectured
+    head_pose: np.ndarray  # (F, 6): rx, ry, rz (rad, eq. 5.4) and tx, ty, tz
+    neutral: np.ndarray  # (N, 3) the first frame, camera frame
+    first_blob: np.ndarray  # (N,) the direct blob index of each marker in the first frame (-1: absent there)
+    assigned_blob: np.ndarray  # (F, N) direct blob index each frame, -1 when not measured
+    colour: np.ndarray  # (N,) colour class of each marker
+    head_frame: np.ndarray = None  # (F, N, 3) positions with head motion removed (NaN where not reported)
+    rigid: np.ndarray = None  # markers that carried the head pose
+    stats: dict = field(default_factory=dict)
+
+
+def robust_rigid_fit(A, B, iterations: int = 5):
+    """Rigid fit with iteratively reweighted least squares: markers moving with the
+    expression (large residuals) get small weights, so the pose follows the rigid part
+    of the face."""
+    w = np.ones(len(A))
+    for _ in range(iterations):
+        R, t = rigid_fit(A, B, w)
+        r = np.linalg.norm(A @ R.T + t - B, axis=1)
+        s = 1.4826 * np.median(r) + 1e-6
+        w = 1.0 / (1.0 + (r / (2.0 * s)) ** 2)
+    return rigid_fit(A, B, w)
+
+
+def _initial_markers(frames, camera, normals, ds, settings):
+    """Step 2: markers are direct-view tracks paired with a mirror track over the first
+    ``init_frames`` frames. Each marker's neutral position is its 3D position at the
+    first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
+    markers both frames share (so markers hidden at frame 0 are tracked too).
+    Returns the marker's frame-0 direct blob (-1 if absent), the neutral structure
+    (N, 3) and the per-frame direct blob of each marker over the window (W, N)."""
+    W = min(settings.init_frames, len(frames))
+    init = frames[:W]
+    dids, n_dt = track_2d([f.direct for f in init], [f.direct_color for f in init])
+    K = len(normals)
+    mate = []
+    mids_all = []
+    for k in range(K):
+        mids, _ = track_2d([f.mirror[k] for f in init], [f.mirror_color[k] for f in init])
+        plane = type("Plane", (), {"normal": normals[k], "d": ds[k]})()
+        pairs = pair_tracks([f.direct for f in init], dids, [f.mirror[k] for f in init], mids,
+                            [f.direct_color for f in init], [f.mirror_color[k] for f in init], camera, plane,
+                            band_px=settings.band_px, min_frames=min(5, W))
+        m = np.full(n_dt, -1)
+        m[pairs.direct_track] = pairs.mirror_track
+        mate.append(m)
+        mids_all.append(mids)
+    tracks = np.flatnonzero(np.any(np.stack(mate) >= 0, axis=0))
+    if tracks.size < 10:
+        raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
+                              "in the first frames; are both mirrors visible and calibrated?")
+    col = {t: i for i, t in enumerate(tracks.tolist())}
+    pos = np.full((W, tracks.size, 3), np.nan)  # 3D per window frame, own frame's camera coordinates
+    blob = np.full((W, tracks.size), -1)
+    for f in range(W):
+        here = np.array([col.get(t, -1) for t in dids[f].tolist()], int)
+        sel = np.flatnonzero(here >= 0)
+        if sel.size == 0:
+            continue
+        marker = here[sel]
+        blob[f, marker] = sel
+        vis = np.zeros((K, sel.size), bool)
+        pm = np.zeros((K, sel.size, 2))
+        for k in range(K):
+            lookup = {t: j for j, t in enumerate(mids_all[k][f].tolist())}
+            j = np.array([lookup.get(mate[k][tracks[mk]], -1) for mk in marker], int)
+            vis[k] = j >= 0
+            if vis[k].any():
+                pm[k, vis[k]] = camera.normalize(init[f].mirror[k][j[vis[k]]])
+        ok = vis.any(axis=0)
+        if ok.any():
+            pos[f, marker[ok]] = points_from_planes(camera.normalize(init[f].direct[sel[ok]]), pm[:, ok],
+                                                    normals, ds, visible=vis[:, ok])
+    colour = np.full(tracks.size, -1)
+    for f in range(W - 1, -1, -1):  # each marker's colour: its direct blob's class, earliest frame wins
+        seen = blob[f] >= 0
+        colour[seen] = np.asarray(init[f].direct_color)[blob[f, seen]]
+    neutral = pos[0].copy()
+    known = np.all(np.isfinite(neutral), axis=1)
+    for f in range(1, W):
+        new = ~known & np.all(np.isfinite(pos[f]), axis=1)
+        common = known & np.all(np.isfinite(pos[f]), axis=1)
+        if new.any() and common.sum() >= 6:
+            R, T = robust_rigid_fit(pos[f, common], neutral[common])  # frame f -> frame 0
+            neutral[new] = pos[f, new] @ R.T + T
+            known |= new
+    keep = np.flatnonzero(known)
+    return blob[0, keep], neutral[keep], colour[keep]
+
+
+def track(frames, camera: Camera, planes, settings: TrackSettings | None = None, progress=None,
+          rigid=None) -> TrackResult:
+    """Track the markers of ``frames`` (objects with ``direct``, ``direct_color``,
+    ``mirror[k]``, ``mirror_color[k]`` in pixels, e.g. :class:`core.simulate.FrameDetections`)
+    given the ``camera`` and mirror ``planes`` (``MirrorPlane`` or ``(normal, d)``).
+
+    Head motion comes from ``rigid`` markers (indices into the result's markers). When
+    not given they are found automatically: a first pass estimates the pose from all
+    markers (robustly), then the ``rigid_fraction`` of markers that moved least
+    relative to the head -- forehead, nose bridge, temples on a real face -- carry the
+    pose in a second pass."""
+    s = settings or TrackSettings()
+    if rigid is None:
+        first = _track_pass(frames, camera, planes, s, None, None)
+        motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
+        motion = np.where(np.isfinite(motion), motion, np.inf)
+        n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
+        rigid = np.argsort(motion)[:n_rigid]
+        result = _track_pass(frames, camera, planes, s, rigid, progress)
+    else:
+        result = _track_pass(frames, camera, planes, s, np.asarray(rigid, int), progress)
+    result.rigid = np.asarray(rigid, int)
+    return result
+
+
+def _track_pass(frames, camera: Camera, planes, s: TrackSettings, rigid, progress) -> TrackResult:
+    normals = np.stack([np.asarray(getattr(pl, "normal", pl[0] if isinstance(pl, tuple) else None), float)
+                        for pl in planes])
+    ds = np.array([float(getattr(pl, "d", pl[1] if isinstance(pl, tuple) else np.nan)) for pl in planes])
+    F = len(frames)
+    if F < 2:
+        raise DegenerateError("tracking needs at least 2 frames")
+    first_blob, neutral, colour = _initial_markers(frames, camera, normals, ds, s)
+    N = len(neutral)
+    nidx, ndist = neighbours(neutral, s.neighbour_radius_mm)
+    z_mid = float(np.median(neutral[:, 2]))
+    depth_range = (z_mid - s.depth_margin_mm, z_mid + s.depth_margin_mm)
+    kf = ConstantVelocityKalman.start(neutral, accel_sigma=s.accel_sigma_mm, initial_sigma=s.measure_sigma_mm)
+    kf_rot = ConstantVelocityKalman.start(np.zeros((1, 3)), accel_sigma=s.pose_accel_sigma[0],
+                                          initial_sigma=s.pose_measure_sigma[0])
+    kf_tr = ConstantVelocityKalman.start(np.zeros((1, 3)), accel_sigma=s.pose_accel_sigma[1],
+                                         initial_sigma=s.pose_measure_sigma[1])
+    points = np.full((F, N, 3), np.nan)
+    head_frame = np.full((F, N, 3), np.nan)
+    conjectured = np.zeros((F, N), bool)
+    camera_mask = np.zeros((F, N), int)
+    head_pose = np.zeros((F, 6))
+    assigned_blob = np.full((F, N), -1)
+    counts = {k: np.zeros(F, int) for k in ("candidates", "measured", "false_tracking", "conflicts", "conjectured")}
+    for t in range(F):
+        fr = frames[t]
+        R_p = rotation_zyx(kf_rot.predict()[0])
+        T_p = kf_tr.predict()[0]
+        pred_h = kf.predict()
+        pred_cam = pred_h @ R_p.T + T_p
+        cand = frame_candidates(camera.normalize(fr.direct), fr.direct_color,
+                                [camera.normalize(m) for m in fr.mirror], fr.mirror_color, normals, ds,
+                                camera.focal_px, band_px=s.band_px, depth_range=depth_range)
+        counts["candidates"][t] = len(cand.direct)
+        # one-to-one within each colour class: a marker only takes candidates of its colour
+        a = np.full(N, -1)
+        cand_colour = np.asarray(fr.direct_color)[cand.direct] if len(cand.direct) else np.zeros(0, int)
+        for c in np.unique(colour):
+            mk = np.flatnonzero(colour == c)
+            cc = np.flatnonzero(cand_colour == c)
+            if cc.size:
+                got = assign_nearest(pred_cam[mk], cand.points[cc], s.gate_mm)
+                a[mk] = np.where(got >= 0, cc[np.maximum(got, 0)], -1)
+        valid = a >= 0
+        # conflicts: one 2D blob claimed by two markers -> keep the one closest to its prediction
+        err = np.where(valid, np.linalg.norm(cand.points[np.maximum(a, 0)] - pred_cam, axis=1), np.inf)
+        for key in [cand.direct] + [cand.mirror_blob[:, k] for k in range(cand.mirror_blob.shape[1])]:
+            blob = np.where(valid, key[np.maximum(a, 0)], -1)
+            order = np.lexsort((err, blob))
+            dup = np.r_[False, (blob[order][1:] == blob[order][:-1]) & (blob[order][1:] >= 0)]
+            loser = order[dup]
+            counts["conflicts"][t] += loser.size
+            valid[loser] = False
+        meas_cam = cand.points[np.maximum(a, 0)]
+        use = valid if rigid is None else valid & np.isin(np.arange(N), rigid)
+        if use.sum() >= 4:
+            R_m, T_m = robust_rigid_fit(neutral[use], meas_cam[use])
+            kf_rot.update(angles_zyx(R_m)[None], s.pose_measure_sigma[0])
+            kf_tr.update(T_m[None], s.pose_measure_sigma[1])
+        R = rotation_zyx(kf_rot.position[0])
+        T = kf_tr.position[0]
+        head_pose[t] = np.r_[kf_rot.position[0], T]
+        meas_h = (meas_cam - T) @ R  # R^T (x - T): head motion removed
+        motion = np.where(valid[:, None], meas_h - neutral, np.nan)
+        false, _ = false_tracking(np.nan_to_num(motion), valid, nidx, threshold=s.false_threshold)
+        counts["false_tracking"][t] = false.sum()
+        valid &= ~false
+        motion[false] = np.nan
+        filled_motion, filled = conjecture_motion(motion, valid, nidx, ndist)
+        z = np.where(valid[:, None], meas_h, neutral + np.nan_to_num(filled_motion))
+        sigma = np.where(valid, s.measure_sigma_mm, s.conjecture_sigma_mm)
+        out_h = kf.update(z, sigma, valid | filled)
+        reported = valid | filled
+        kf.velocity[~reported] = 0.0  # lost and not conjecturable: hold still rather than drift away
+        points[t] = np.where(reported[:, None], out_h @ R.T + T, np.nan)
+        head_frame[t] = np.where(reported[:, None], out_h, np.nan)
+        conjectured[t] = filled
+        counts["conjectured"][t] = filled.sum()
+        counts["measured"][t] = valid.sum()
+        blobs = cand.mirror_blob[np.maximum(a, 0)]
+        mask = 1 | ((blobs[:, 0] >= 0) << 1) | (((blobs[:, 1] >= 0) << 2) if blobs.shape[1] > 1 else 0)
+        camera_mask[t] = np.where(valid, mask, 0)
+        assigned_blob[t] = np.where(valid, cand.direct[np.maximum(a, 0)], -1)
+        if progress:
+            progress(t + 1, F)
+    labels = [f"m{i:03d}" for i in range(N)]
+    return TrackResult(labels=labels, points=points, conjectured=conjectured, camera_mask=camera_mask,
+                       head_pose=head_pose, neutral=neutral, first_blob=first_blob, assigned_blob=assigned_blob,
+                       colour=colour, head_frame=head_frame, stats=counts)
