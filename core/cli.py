@@ -8,6 +8,8 @@ Commands:
     camera intrinsics and distortion from views of a chessboard or ChArUco board.
 ``mirrorcap detect VIDEO [--camera CAMERA.json] [--colors COLORS.json] [--rig RIG.json] -o DETECTIONS.csv``
     markers in every frame, in the direct view and both mirrors.
+``mirrorcap track VIDEO --camera CAMERA.json -o TAKE.c3d [--report REPORT.json] [--mirrors MIRRORS.json]``
+    labelled 3D marker trajectories with head motion separated.
 ``mirrorcap mirrors VIDEO --camera CAMERA.json --board charuco:... -o MIRRORS.json``
     mirror planes (in mm) from a ChArUco board seen directly and in both mirrors.
 ``mirrorcap colors learn VIDEO --classes K -o COLORS.json``
@@ -24,6 +26,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+
+import numpy as np
 from pathlib import Path
 
 from . import __version__
@@ -117,6 +121,37 @@ def _cmd_detect(args) -> int:
         n = report["frames"]["processed"]
         print(f"{n} frames -> {args.output}: per frame {c['direct'] / n:.1f} direct, {c['mirror0'] / n:.1f} mirror0, "
               f"{c['mirror1'] / n:.1f} mirror1 ({report['frames_per_second']:.0f} frames/s)")
+    return 0
+
+
+def _cmd_track(args) -> int:
+    from .boardcal import load_mirrors
+    from .camera import Camera
+    from .markers import ColorClasses, load_rig_views
+    from .take import run_track
+
+    camera = Camera.load(args.camera)
+    colors = ColorClasses.load(args.colors) if args.colors else None
+    layout = load_rig_views(args.rig) if args.rig else None
+    mirrors = load_mirrors(args.mirrors) if args.mirrors else None
+    known = None
+    if args.known_length:
+        a, b, mm = args.known_length
+        try:
+            known = (a, b, float(mm))
+        except ValueError:
+            raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
+    source, start, end = _open(args)
+    report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
+                       colors=colors, layout=layout, mirrors=mirrors, known_length=known, start=start, end=end,
+                       step=args.step)
+    if not args.quiet:
+        pf = report["per_frame"]
+        n = report["frames"]["count"]
+        print(f"{report['markers']['count']} markers over {n} frames -> {args.output} [{report['units']}]")
+        print(f"  per frame: {np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured, "
+              f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts; "
+              f"tracking {report['timings_s']['tracking_frames_per_s']:.0f} frames/s")
     return 0
 
 
@@ -224,6 +259,24 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
     det.add_argument("-q", "--quiet", action="store_true", help="no progress or summary")
     det.set_defaults(func=_cmd_detect)
+
+    trk = sub.add_parser("track", help="labelled 3D marker trajectories from a rig video (C3D)",
+                         description="Detect markers, calibrate the mirrors (MIRRORS.json or self-calibration from "
+                                     "the markers), track them in 3D with head motion separated, and write a C3D take.")
+    trk.add_argument("source", help="rig video file, image folder or glob")
+    trk.add_argument("--camera", required=True, help="CAMERA.json")
+    trk.add_argument("-o", "--output", required=True, help="TAKE.c3d to write")
+    trk.add_argument("--report", help="REPORT.json to write beside the take")
+    trk.add_argument("--mirrors", help="MIRRORS.json (from `mirrorcap mirrors`); default: self-calibration")
+    trk.add_argument("--known-length", nargs=3, metavar=("LABEL_A", "LABEL_B", "MM"),
+                     help="distance between two tracked markers (labels m000..) in mm; sets the units to mm")
+    trk.add_argument("--colors", help="COLORS.json colour classes")
+    trk.add_argument("--rig", help="RIG.json view rectangles")
+    trk.add_argument("--frames", help="START:END frame range")
+    trk.add_argument("--step", type=int, default=1)
+    trk.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
+    trk.add_argument("-q", "--quiet", action="store_true")
+    trk.set_defaults(func=_cmd_track)
 
     mir = sub.add_parser("mirrors", help="mirror planes in mm from a ChArUco board seen in all three views",
                          description="Detect a ChArUco board directly and (flipped) in both mirrors, estimate each "

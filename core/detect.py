@@ -96,6 +96,57 @@ class _Progress:
                   file=sys.stderr, flush=True)
 
 
+class DetectionStream:
+    """Detections of a source frame by frame, each assigned to its view: iterate to get
+    ``(frame_number, Detections, view (n,))``. Until the view layout is known (from a
+    rig file, or from the first ``LAYOUT_FRAMES`` frames' gaps) detections are buffered
+    -- detections, never images. ``extract_s`` accumulates the extraction time and
+    ``processed`` the frames read; ``layout`` is set once known."""
+
+    def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
+                 layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
+                 progress=None):
+        self.source, self.colors, self.settings, self.layout = source, colors, settings, layout
+        self.start, self.end, self.step = start, end, step
+        end_eff = source.frame_count if end is None else min(end, source.frame_count)
+        self.total = len(range(start, end_eff, step))
+        self.progress = progress
+        self.extract_s = 0.0
+        self.processed = 0
+
+    def __iter__(self):
+        extractor = MarkerExtractor(self.colors, self.settings)
+        pending = []
+        for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
+            t0 = time.perf_counter()
+            det = extractor(frame)
+            self.extract_s += time.perf_counter() - t0
+            self.processed += 1
+            if self.progress:
+                self.progress(self.processed)
+            if self.layout is None:
+                pending.append((n, det))
+                if len(pending) >= min(LAYOUT_FRAMES, self.total):
+                    self.layout = _layout_from(pending, self.settings, self.source)
+                    for m, d in pending:
+                        yield m, d, self.layout.assign(d.x, d.y)
+                    pending = []
+            else:
+                yield n, det, self.layout.assign(det.x, det.y)
+        if self.layout is None:
+            if self.processed == 0:
+                raise InputError(f"no frame could be read from {self.source.path}")
+            self.layout = _layout_from(pending, self.settings, self.source)
+            for m, d in pending:
+                yield m, d, self.layout.assign(d.x, d.y)
+
+
+def _check_camera(camera: Camera | None, source: VideoSource):
+    if camera is not None and camera.image_size != source.size:
+        raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but "
+                         f"{source.path} is {source.size[0]}x{source.size[1]}")
+
+
 def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = None,
                   settings: ExtractionSettings | None = None, layout: ViewLayout | None = None,
                   camera: Camera | None = None, start: int = 0, end: int | None = None, step: int = 1,
@@ -104,29 +155,20 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
     atomically. Returns the report written to the JSON."""
     colors = colors or ColorClasses.default()
     settings = settings or ExtractionSettings()
-    if camera is not None and camera.image_size != source.size:
-        raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but "
-                         f"{source.path} is {source.size[0]}x{source.size[1]}")
+    _check_camera(camera, source)
     output = Path(output)
     if not output.parent.is_dir():
         raise InputError(f"output folder {output.parent} does not exist")
-    end_eff = source.frame_count if end is None else min(end, source.frame_count)
-    total = len(range(start, end_eff, step))
-    extractor = MarkerExtractor(colors, settings)
-    report_progress = _Progress(total, "detect", progress)
+    stream = DetectionStream(source, colors, settings, layout, start, end, step)
+    stream.progress = _Progress(stream.total, "detect", progress)
     counts = np.zeros(len(VIEW_NAMES) + 1, dtype=np.int64)  # last: outside every view
-    t_extract = t_write = 0.0
-    done = 0
-    pending = []  # detections buffered until the view layout is known
+    t_write = 0.0
     fd, tmp = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".tmp", dir=output.parent)
     t_start = time.perf_counter()
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(",".join(DETECTION_COLUMNS) + "\n")
-
-            def emit(n, det):
-                nonlocal t_write
-                view = layout.assign(det.x, det.y)
+            for n, det, view in stream:
                 counts[:-1] += np.bincount(view[view >= 0], minlength=len(VIEW_NAMES))
                 counts[-1] += np.count_nonzero(view < 0)
                 ok = view >= 0
@@ -134,37 +176,19 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
                 fh.write(format_detection_rows(n, view[ok], det.x[ok], det.y[ok], det.color[ok], det.area[ok],
                                                det.intensity[ok], color_names=colors.names))
                 t_write += time.perf_counter() - t0
-
-            for n, frame in source.frames(start, end, step, prefetch=4):
-                t0 = time.perf_counter()
-                det = extractor(frame)
-                t_extract += time.perf_counter() - t0
-                done += 1
-                if layout is None:
-                    pending.append((n, det))
-                    if len(pending) >= min(LAYOUT_FRAMES, total):
-                        layout = _layout_from(pending, settings, source)
-                        for item in pending:
-                            emit(*item)
-                        pending = []
-                else:
-                    emit(n, det)
-                report_progress(done)
-            if layout is None:  # fewer frames than LAYOUT_FRAMES and the loop ended early
-                if done == 0:
-                    raise InputError(f"no frame could be read from {source.path}")
-                layout = _layout_from(pending, settings, source)
-                for item in pending:
-                    emit(*item)
             fh.flush()
             os.fsync(fh.fileno())
-        report_progress(done, final=True)
+        stream.progress(stream.processed, final=True)
+        done = stream.processed
         if done == 0:
             raise InputError(f"no frame could be read from {source.path}")
         if counts[:-1].sum() == 0:
             raise InputError(f"no markers found in {source.path} (threshold {settings.threshold:g}); "
                              "is this a rig video, or does --threshold need lowering?")
         elapsed = time.perf_counter() - t_start
+        t_extract = stream.extract_s
+        end_eff = source.frame_count if end is None else min(end, source.frame_count)
+        layout = stream.layout
         report = {
             "source": {"path": source.path, "kind": source.kind, "fps": source.fps,
                        "frame_count": source.frame_count, "size": list(source.size)},

@@ -1,0 +1,121 @@
+"""Rig video -> TAKE.c3d + REPORT.json (``mirrorcap track``).
+
+The stages in order: marker detection (``core.detect``), mirror planes (from
+MIRRORS.json, else self-calibrated from the first frames' markers, ``core.selfcal``),
+tracking (``core.track``), an optional known-length scale, and the outputs, written
+together atomically.
+
+REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
+self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (count,
+labels, the rigid markers that carried the head pose); ``head_pose`` (per frame
+``[rx, ry, rz, tx, ty, tz]``, radians and output units, eq. 5.4, relative to the first
+frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
+``conflicts``, ``conjectured``); ``timings_s``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .atomic import write_files_atomically
+from .c3d import c3d_bytes
+from .camera import Camera
+from .errors import DegenerateError, InputError
+from .markers import ColorClasses, ExtractionSettings, ViewLayout
+from .mirror import MirrorPlane
+from .track import TrackSettings, track
+from .video import VideoSource
+
+SELFCAL_FRAMES = 10
+
+
+@dataclass
+class FrameDets:
+    """One frame's detections per view (pixels, colour-class indices)."""
+
+    direct: np.ndarray
+    direct_color: np.ndarray
+    mirror: list = field(default_factory=list)
+    mirror_color: list = field(default_factory=list)
+
+
+def collect_detections(stream) -> tuple[list, list]:
+    """Frame numbers and :class:`FrameDets` from a :class:`core.detect.DetectionStream`."""
+    numbers, frames = [], []
+    for n, det, view in stream:
+        pick = [view == v for v in range(3)]
+        xy = np.c_[det.x, det.y]
+        frames.append(FrameDets(direct=xy[pick[0]], direct_color=det.color[pick[0]],
+                                mirror=[xy[pick[1]], xy[pick[2]]], mirror_color=[det.color[pick[1]], det.color[pick[2]]]))
+        numbers.append(n)
+    return numbers, frames
+
+
+def run_track(source: VideoSource, camera: Camera, output, *, report=None, colors: ColorClasses | None = None,
+              extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
+              known_length=None, start: int = 0, end: int | None = None, step: int = 1,
+              settings: TrackSettings | None = None, progress=None) -> dict:
+    """Track ``source`` and write the take (C3D) and its report (JSON)."""
+    from .detect import DetectionStream, _check_camera
+    from .selfcal import link_self_calibrated, self_calibrate_mirror
+
+    _check_camera(camera, source)
+    t0 = time.perf_counter()
+    stream = DetectionStream(source, colors or ColorClasses.default(), extraction or ExtractionSettings(), layout,
+                             start, end, step, progress)
+    numbers, frames = collect_detections(stream)
+    t_detect = time.perf_counter() - t0
+    if len(frames) < 2:
+        raise InputError("tracking needs at least 2 frames")
+    if mirrors is None:
+        if any(len(f.mirror[k]) < 6 for f in frames[:SELFCAL_FRAMES] for k in range(2)):
+            raise DegenerateError("a mirror shows fewer than 6 markers in the first frames: are both mirrors "
+                                  "visible? (give MIRRORS.json from `mirrorcap mirrors` otherwise)")
+        cals = [self_calibrate_mirror(frames[:SELFCAL_FRAMES], camera, k) for k in range(2)]
+        ds = link_self_calibrated(frames[:SELFCAL_FRAMES], camera, cals)
+        planes = [MirrorPlane(normal=c.plane.normal, d=float(d)) for c, d in zip(cals, ds)]
+        mirror_source, units = "self-calibration", "relative"
+    else:
+        planes, mirror_source, units = list(mirrors), "file", "mm"
+    t1 = time.perf_counter()
+    result = track(frames, camera, planes, settings)
+    t_track = time.perf_counter() - t1
+    points = result.points
+    head = result.head_pose.copy()
+    if known_length is not None:
+        a, b, mm = known_length
+        try:
+            ia, ib = result.labels.index(a), result.labels.index(b)
+        except ValueError:
+            raise InputError(f"--known-length names a marker that is not in the take ({a!r}, {b!r}); labels run "
+                             f"{result.labels[0]}..{result.labels[-1]}") from None
+        est = float(np.linalg.norm(result.neutral[ia] - result.neutral[ib]))
+        if not (mm > 0 and est > 0):
+            raise InputError("--known-length needs two distinct markers and a positive length")
+        scale = mm / est
+        points = points * scale
+        head[:, 3:] *= scale
+        planes = [MirrorPlane(normal=p.normal, d=p.d * scale) for p in planes]
+        units = "mm"
+    rate = source.fps / step
+    report_data = {
+        "units": units,
+        "mirrors": [{"mirror": k, "normal": [float(v) for v in p.normal], "d": float(p.d), "source": mirror_source}
+                    for k, p in enumerate(planes)],
+        "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
+        "markers": {"count": len(result.labels), "labels": result.labels,
+                    "rigid": [result.labels[i] for i in result.rigid]},
+        "head_pose": head.tolist(),
+        "per_frame": {k: v.tolist() for k, v in result.stats.items()},
+        "timings_s": {"detect": t_detect, "track": t_track, "tracking_frames_per_s": len(frames) / max(t_track, 1e-9)},
+    }
+    files = {output: c3d_bytes(result.labels, points, rate, units=units if units == "mm" else "rel",
+                               camera_mask=result.camera_mask, conjectured=result.conjectured)}
+    if report is not None:
+        files[report] = json.dumps(report_data, indent=1) + "\n"
+    write_files_atomically(files)
+    return report_data
