@@ -196,3 +196,34 @@ def conjecture_motion(motion, valid, neighbour_idx, neighbour_dist, kc: float = 
     out[filled] = est[filled]
     out[missing & ~filled] = np.nan
     return out, filled
+
+
+def conjecture_since_last_seen(motion, valid, neighbour_idx, neighbour_dist, last_motion, last_frame, history,
+                               kc: float = 1.0):
+    """A temporal refinement of eq. 5.8 for markers missing now but measured before:
+    ``v_i(t) = v_i(t_i) + sum_j w_ij (v_j(t) - v_j(t_i)) / sum_j w_ij`` -- the marker
+    keeps its own motion at its last measurement ``t_i`` and borrows only its
+    neighbours' motion since then (same weights as eq. 5.8). ``history`` ``(T, N, 3)``
+    holds every marker's motion per past frame (NaN where not reported);
+    ``last_motion`` ``(N, 3)`` and ``last_frame`` ``(N,)`` (-1: never measured) the
+    last measurement. Returns ``(motion (N, 3), filled (N,))`` for the markers it could
+    fill."""
+    v = np.asarray(motion, float)
+    missing = ~np.asarray(valid, bool) & (np.asarray(last_frame) >= 0)
+    out = np.full_like(v, np.nan)
+    filled = np.zeros(len(v), bool)
+    rows = np.flatnonzero(missing)
+    if rows.size == 0:
+        return out, filled
+    idx = neighbour_idx[rows]  # (M, K)
+    safe = np.maximum(idx, 0)
+    now = v[safe]  # (M, K, 3) neighbours' motion now
+    then = history[np.asarray(last_frame)[rows][:, None], safe]  # (M, K, 3) at the marker's last sighting
+    ok = (idx >= 0) & np.asarray(valid, bool)[safe] & np.all(np.isfinite(then), axis=2) & np.all(np.isfinite(now), axis=2)
+    w = np.where(ok, 1.0 / (np.asarray(neighbour_dist)[rows] + kc), 0.0)
+    total = w.sum(axis=1)
+    delta = (np.nan_to_num(now - then) * w[..., None]).sum(axis=1) / np.where(total > 0, total, 1.0)[:, None]
+    good = total > 0
+    out[rows[good]] = np.asarray(last_motion)[rows[good]] + delta[good]
+    filled[rows[good]] = True
+    return out, filled

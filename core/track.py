@@ -35,6 +35,7 @@ from .motion import (
     ConstantVelocityKalman,
     angles_zyx,
     conjecture_motion,
+    conjecture_since_last_seen,
     false_tracking,
     neighbours,
     rigid_fit,
@@ -57,6 +58,7 @@ class TrackSettings:
     pose_measure_sigma: tuple = (0.0005, 0.05)
     depth_margin_mm: float = 200.0  # candidates deeper/shallower than the neutral face +- this are dropped
     rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
+    min_measured_frames: int = 5  # a marker measured in fewer frames is not reported
 
 
 @dataclass
@@ -166,27 +168,115 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     relative to the head -- forehead, nose bridge, temples on a real face -- carry the
     pose in a second pass."""
     s = settings or TrackSettings()
-    if rigid is None:
-        first = _track_pass(frames, camera, planes, s, None, None)
-        motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
-        motion = np.where(np.isfinite(motion), motion, np.inf)
-        n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
-        rigid = np.argsort(motion)[:n_rigid]
-        result = _track_pass(frames, camera, planes, s, rigid, progress)
-    else:
-        result = _track_pass(frames, camera, planes, s, np.asarray(rigid, int), progress)
-    result.rigid = np.asarray(rigid, int)
-    return result
-
-
-def _track_pass(frames, camera: Camera, planes, s: TrackSettings, rigid, progress) -> TrackResult:
     normals = np.stack([np.asarray(getattr(pl, "normal", pl[0] if isinstance(pl, tuple) else None), float)
                         for pl in planes])
     ds = np.array([float(getattr(pl, "d", pl[1] if isinstance(pl, tuple) else np.nan)) for pl in planes])
-    F = len(frames)
-    if F < 2:
+    if len(frames) < 2:
         raise DegenerateError("tracking needs at least 2 frames")
-    first_blob, neutral, colour = _initial_markers(frames, camera, normals, ds, s)
+    markers = _initial_markers(frames, camera, normals, ds, s)
+    n_initial = len(markers[1])
+    given = None if rigid is None else np.asarray(rigid, int)
+    first = _track_pass(frames, camera, normals, ds, s, markers, given, None)
+    if given is None:
+        motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
+        motion = np.where(np.isfinite(motion), motion, np.inf)
+        n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
+        given = np.argsort(motion)[:n_rigid]
+    markers = _add_late_markers(frames, camera, normals, ds, s, markers, first)
+    result = _track_pass(frames, camera, normals, ds, s, markers, given, progress)
+    result.rigid = given
+    result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
+    return _keep_measured(result, s.min_measured_frames)
+
+
+def _keep_measured(result: TrackResult, min_frames: int) -> TrackResult:
+    """A marker must earn its place: one measured in fewer than ``min_frames`` frames
+    is dropped (a pairing that never matched real candidates), and nothing is
+    reported for a marker before its first measurement."""
+    measured = result.assigned_blob >= 0
+    keep = np.flatnonzero(measured.sum(axis=0) >= min_frames)
+    first = np.argmax(measured, axis=0)
+    before = np.arange(measured.shape[0])[:, None] < first[None, :]
+    result.points[before] = np.nan
+    result.head_frame[before] = np.nan
+    result.conjectured[before] = False
+    result.camera_mask[before] = 0
+    old_to_new = np.full(measured.shape[1], -1)
+    old_to_new[keep] = np.arange(keep.size)
+    rigid = old_to_new[result.rigid]
+    result.rigid = rigid[rigid >= 0]
+    for name in ("points", "conjectured", "camera_mask", "assigned_blob", "head_frame"):
+        setattr(result, name, getattr(result, name)[:, keep])
+    for name in ("neutral", "first_blob", "colour"):
+        setattr(result, name, getattr(result, name)[keep])
+    result.labels = [f"m{i:03d}" for i in range(keep.size)]
+    result.stats["markers_dropped_unmeasured"] = np.array([measured.shape[1] - keep.size])
+    return result
+
+
+def _add_late_markers(frames, camera, normals, ds, s, markers, first_pass):
+    """Markers the initial window missed (hidden at the start, turned into view later):
+    direct-view tracks over the whole clip that pair with a mirror track but were never
+    claimed by a tracked marker. Each enters at its head-frame position when first
+    paired (the first pass's head pose); one within 4 mm of an existing marker is the
+    same marker found again and is not added."""
+    first_blob, neutral, colour = markers
+    F = len(frames)
+    dids, n_dt = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
+    claimed = np.zeros(n_dt, bool)
+    for t in range(F):
+        ab = first_pass.assigned_blob[t]
+        claimed[dids[t][ab[ab >= 0]]] = True
+    K = len(normals)
+    partner = np.full((K, n_dt), -1)
+    mids_all = []
+    for k in range(K):
+        mids, _ = track_2d([f.mirror[k] for f in frames], [f.mirror_color[k] for f in frames])
+        plane = type("Plane", (), {"normal": normals[k], "d": ds[k]})()
+        pairs = pair_tracks([f.direct for f in frames], dids, [f.mirror[k] for f in frames], mids,
+                            [f.direct_color for f in frames], [f.mirror_color[k] for f in frames], camera, plane,
+                            band_px=s.band_px, min_frames=5)
+        partner[k, pairs.direct_track] = pairs.mirror_track
+        mids_all.append(mids)
+    new_tracks = np.flatnonzero((partner >= 0).any(axis=0) & ~claimed)
+    added_pos, added_col = [], []
+    for tr in new_tracks.tolist():  # a one-time pass over the few new tracks, not a per-frame loop
+        for t in range(F):
+            i = np.flatnonzero(dids[t] == tr)
+            if i.size == 0:
+                continue
+            vis = np.zeros(K, bool)
+            pm = np.zeros((K, 1, 2))
+            for k in range(K):
+                j = np.flatnonzero(mids_all[k][t] == partner[k, tr]) if partner[k, tr] >= 0 else []
+                if len(j):
+                    vis[k] = True
+                    pm[k, 0] = camera.normalize(frames[t].mirror[k][j[0]])
+            if not vis.any():
+                continue
+            X = points_from_planes(camera.normalize(frames[t].direct[i[:1]]), pm, normals, ds,
+                                   visible=vis[:, None])[0]
+            h = first_pass.head_pose[t]
+            added_pos.append((X - h[3:]) @ rotation_zyx(h[:3]))  # into the head frame of frame 0
+            added_col.append(int(frames[t].direct_color[i[0]]))
+            break
+    if not added_pos:
+        return markers
+    pos = np.array(added_pos)
+    keep = []
+    for q in range(len(pos)):
+        others = np.vstack([neutral] + [pos[keep]] if keep else [neutral])
+        if np.min(np.linalg.norm(others - pos[q], axis=1)) > 4.0:
+            keep.append(q)
+    if not keep:
+        return markers
+    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, pos[keep]]),
+            np.r_[colour, np.array(added_col)[keep]])
+
+
+def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, rigid, progress) -> TrackResult:
+    F = len(frames)
+    first_blob, neutral, colour = markers
     N = len(neutral)
     nidx, ndist = neighbours(neutral, s.neighbour_radius_mm)
     z_mid = float(np.median(neutral[:, 2]))
@@ -198,6 +288,8 @@ def _track_pass(frames, camera: Camera, planes, s: TrackSettings, rigid, progres
                                          initial_sigma=s.pose_measure_sigma[1])
     points = np.full((F, N, 3), np.nan)
     head_frame = np.full((F, N, 3), np.nan)
+    last_motion = np.zeros((N, 3))  # each marker's motion at its last measurement
+    last_frame = np.full(N, -1)
     conjectured = np.zeros((F, N), bool)
     camera_mask = np.zeros((F, N), int)
     head_pose = np.zeros((F, 6))
@@ -247,11 +339,19 @@ def _track_pass(frames, camera: Camera, planes, s: TrackSettings, rigid, progres
         counts["false_tracking"][t] = false.sum()
         valid &= ~false
         motion[false] = np.nan
+        # markers seen before: their own last motion plus the neighbours' motion since;
+        # never seen (or no such neighbour): eq. 5.8 from the neighbours' motion now
+        since, filled_since = conjecture_since_last_seen(motion, valid, nidx, ndist, last_motion, last_frame,
+                                                         head_frame - neutral[None])
         filled_motion, filled = conjecture_motion(motion, valid, nidx, ndist)
+        filled_motion = np.where(filled_since[:, None], since, filled_motion)
+        filled |= filled_since
         z = np.where(valid[:, None], meas_h, neutral + np.nan_to_num(filled_motion))
         sigma = np.where(valid, s.measure_sigma_mm, s.conjecture_sigma_mm)
         out_h = kf.update(z, sigma, valid | filled)
         reported = valid | filled
+        last_motion[valid] = motion[valid]
+        last_frame[valid] = t
         kf.velocity[~reported] = 0.0  # lost and not conjecturable: hold still rather than drift away
         points[t] = np.where(reported[:, None], out_h @ R.T + T, np.nan)
         head_frame[t] = np.where(reported[:, None], out_h, np.nan)
