@@ -119,3 +119,29 @@ def test_conjectured_motion_follows_the_neighbours(face_field):
     assert np.array_equal(est[~missing], motion[~missing])
     isolated, filled = conjecture_motion(given, np.zeros(len(neutral), bool), idx, dist)
     assert not filled.any() and np.all(np.isnan(isolated))
+
+
+def test_conjecture_since_last_seen_keeps_the_markers_own_motion(face_field):
+    """A marker with its own offset (e.g. a mole the neighbours do not share) keeps it
+    while missing; eq. 5.8 alone would replace it by the neighbours' average."""
+    from core.motion import conjecture_since_last_seen
+
+    neutral, motion = face_field
+    idx, dist = neighbours(neutral, 25.0)
+    n = len(neutral)
+    own = np.zeros((n, 3))
+    own[::7] = [1.5, -1.0, 0.5]  # markers with a motion of their own
+    past = motion * 0.5 + own  # the last frame every marker was seen
+    now = motion + own
+    history = past[None]  # one past frame, index 0
+    missing = np.zeros(n, bool)
+    missing[::7] = True
+    given = np.where(missing[:, None], np.nan, now)
+    since, filled = conjecture_since_last_seen(given, ~missing, idx, dist, past, np.zeros(n, int), history)
+    plain, _ = conjecture_motion(given, ~missing, idx, dist)
+    assert filled[missing].mean() > 0.95 and not filled[~missing].any()
+    err_since = np.linalg.norm(since[filled] - now[filled], axis=1)
+    err_plain = np.linalg.norm(plain[filled] - now[filled], axis=1)
+    assert err_since.max() < 0.5 and np.mean(err_since) < 0.25 * np.mean(err_plain)
+    never, nfilled = conjecture_since_last_seen(given, ~missing, idx, dist, past, np.full(n, -1), history)
+    assert not nfilled.any()  # never measured: left to eq. 5.8
