@@ -200,6 +200,16 @@ def _cmd_demo(args) -> int:
     return run_demo(Path(args.out), quiet=args.quiet)
 
 
+def _source_options(parser, what: str = "video file, image folder or glob", frames: bool = True):
+    """The options every command reading a rig video shares."""
+    parser.add_argument("source", help=what)
+    if frames:
+        parser.add_argument("--frames", help="START:END frame range (END exclusive)")
+        parser.add_argument("--step", type=int, default=1, help="use every STEP-th frame")
+    parser.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mirrorcap",
@@ -230,7 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     cal = sub.add_parser("calibrate", help="camera intrinsics from views of a calibration board",
                          description="Calibrate the camera from a video or images of a chessboard or ChArUco board.")
-    cal.add_argument("source", help="video file, image folder or glob")
+    _source_options(cal, frames=False)
     cal.add_argument("--board", required=True,
                      help="chessboard:COLSxROWS:SQUARE_MM (inner corners) or "
                           "charuco:COLSxROWS:SQUARE_MM:MARKER_MM[:DICT] (squares)")
@@ -238,14 +248,12 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--max-views", type=int, default=40, help="frames sampled evenly from the source (default 40)")
     cal.add_argument("--min-views", type=int, default=6, help="fewest views with the board found (default 6)")
     cal.add_argument("--max-rms", type=float, default=1.0, help="largest acceptable RMS reprojection error, px")
-    cal.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
-    cal.add_argument("-q", "--quiet", action="store_true")
     cal.set_defaults(func=_cmd_calibrate)
 
     det = sub.add_parser("detect", help="find the markers in every frame of a rig video",
                          description="Marker extraction (threshold, colour 1-NN, connected components, merging, "
                                      "specks removed, sub-pixel centres) in the direct view and both mirrors.")
-    det.add_argument("source", help="video file, image folder or glob")
+    _source_options(det)
     det.add_argument("-o", "--output", required=True, help="DETECTIONS.csv to write (a .json report goes beside it)")
     det.add_argument("--camera", help="CAMERA.json; its image size must match the video")
     det.add_argument("--colors", help="COLORS.json colour classes (default: the four blacklight colours)")
@@ -254,16 +262,12 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument("--min-area", type=int, default=4, help="smallest marker in pixels (default 4)")
     det.add_argument("--marker-diameter", type=float, default=6.0,
                      help="marker diameter in pixels; closer fragments of one colour merge (default 6)")
-    det.add_argument("--frames", help="START:END frame range (END exclusive)")
-    det.add_argument("--step", type=int, default=1, help="use every STEP-th frame")
-    det.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
-    det.add_argument("-q", "--quiet", action="store_true", help="no progress or summary")
     det.set_defaults(func=_cmd_detect)
 
     trk = sub.add_parser("track", help="labelled 3D marker trajectories from a rig video (C3D)",
                          description="Detect markers, calibrate the mirrors (MIRRORS.json or self-calibration from "
                                      "the markers), track them in 3D with head motion separated, and write a C3D take.")
-    trk.add_argument("source", help="rig video file, image folder or glob")
+    _source_options(trk, "rig video file, image folder or glob")
     trk.add_argument("--camera", required=True, help="CAMERA.json")
     trk.add_argument("-o", "--output", required=True, help="TAKE.c3d to write")
     trk.add_argument("--report", help="REPORT.json to write beside the take")
@@ -272,39 +276,27 @@ def build_parser() -> argparse.ArgumentParser:
                      help="distance between two tracked markers (labels m000..) in mm; sets the units to mm")
     trk.add_argument("--colors", help="COLORS.json colour classes")
     trk.add_argument("--rig", help="RIG.json view rectangles")
-    trk.add_argument("--frames", help="START:END frame range")
-    trk.add_argument("--step", type=int, default=1)
-    trk.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
-    trk.add_argument("-q", "--quiet", action="store_true")
     trk.set_defaults(func=_cmd_track)
 
     mir = sub.add_parser("mirrors", help="mirror planes in mm from a ChArUco board seen in all three views",
                          description="Detect a ChArUco board directly and (flipped) in both mirrors, estimate each "
                                      "mirror plane (eq. 3.8 with RANSAC) and fix the scale from the board's size.")
-    mir.add_argument("source", help="video file, image folder or glob of the board in the rig")
+    _source_options(mir, "video file, image folder or glob of the board in the rig")
     mir.add_argument("--camera", required=True, help="CAMERA.json")
     mir.add_argument("--board", required=True, help="charuco:COLSxROWS:SQUARE_MM:MARKER_MM[:DICT]")
     mir.add_argument("-o", "--output", required=True, help="MIRRORS.json to write")
     mir.add_argument("--rig", help="RIG.json view rectangles (default: the image's thirds)")
-    mir.add_argument("--frames", help="START:END frame range")
-    mir.add_argument("--step", type=int, default=1)
     mir.add_argument("--threshold", type=float, default=2.0, help="RANSAC threshold in pixels (default 2)")
-    mir.add_argument("--fps", type=float)
-    mir.add_argument("-q", "--quiet", action="store_true")
     mir.set_defaults(func=_cmd_mirrors)
 
     colors = sub.add_parser("colors", help="colour classes for marker labelling")
     colors_sub = colors.add_subparsers(dest="colors_command", required=True, metavar="ACTION")
     learn = colors_sub.add_parser("learn", help="learn colour classes from sample frames (k-means)")
-    learn.add_argument("source", help="video file, image folder or glob")
+    _source_options(learn)
     learn.add_argument("--classes", type=int, required=True, help="number of colour classes")
     learn.add_argument("-o", "--output", required=True, help="COLORS.json to write")
     learn.add_argument("--names", help="comma-separated class names, in hue order")
-    learn.add_argument("--frames", help="START:END frame range")
-    learn.add_argument("--step", type=int, default=1)
     learn.add_argument("--threshold", type=float, default=60.0)
-    learn.add_argument("--fps", type=float)
-    learn.add_argument("-q", "--quiet", action="store_true")
     learn.set_defaults(func=_cmd_colors_learn)
 
     demo = sub.add_parser("demo", help="run the main job on the embedded sample and print its accuracy")

@@ -30,7 +30,7 @@ import numpy as np
 from .camera import Camera
 from .candidates import assign_nearest, frame_candidates
 from .errors import DegenerateError
-from .mirror import points_from_planes
+from .mirror import MirrorPlane, points_from_planes
 from .motion import (
     ConstantVelocityKalman,
     angles_zyx,
@@ -90,6 +90,25 @@ def robust_rigid_fit(A, B, iterations: int = 5):
     return rigid_fit(A, B, w)
 
 
+def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int):
+    """2D tracks of the direct view and of each mirror over ``frames``, and each direct
+    track's partner track per mirror (``core.pairing``; -1: none). Returns
+    ``(direct ids per frame, number of direct tracks, partner (K, n), mirror ids per
+    frame per mirror)``."""
+    dids, n_dt = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
+    K = len(normals)
+    partner = np.full((K, n_dt), -1)
+    mids_all = []
+    for k in range(K):
+        mids, _ = track_2d([f.mirror[k] for f in frames], [f.mirror_color[k] for f in frames])
+        pairs = pair_tracks([f.direct for f in frames], dids, [f.mirror[k] for f in frames], mids,
+                            [f.direct_color for f in frames], [f.mirror_color[k] for f in frames], camera,
+                            MirrorPlane(normal=normals[k], d=float(ds[k])), band_px=band_px, min_frames=min_frames)
+        partner[k, pairs.direct_track] = pairs.mirror_track
+        mids_all.append(mids)
+    return dids, n_dt, partner, mids_all
+
+
 def _initial_markers(frames, camera, normals, ds, settings):
     """Step 2: markers are direct-view tracks paired with a mirror track over the first
     ``init_frames`` frames. Each marker's neutral position is its 3D position at the
@@ -99,21 +118,9 @@ def _initial_markers(frames, camera, normals, ds, settings):
     (N, 3) and the per-frame direct blob of each marker over the window (W, N)."""
     W = min(settings.init_frames, len(frames))
     init = frames[:W]
-    dids, n_dt = track_2d([f.direct for f in init], [f.direct_color for f in init])
+    dids, n_dt, mate, mids_all = _paired_tracks(init, camera, normals, ds, settings.band_px, min(5, W))
     K = len(normals)
-    mate = []
-    mids_all = []
-    for k in range(K):
-        mids, _ = track_2d([f.mirror[k] for f in init], [f.mirror_color[k] for f in init])
-        plane = type("Plane", (), {"normal": normals[k], "d": ds[k]})()
-        pairs = pair_tracks([f.direct for f in init], dids, [f.mirror[k] for f in init], mids,
-                            [f.direct_color for f in init], [f.mirror_color[k] for f in init], camera, plane,
-                            band_px=settings.band_px, min_frames=min(5, W))
-        m = np.full(n_dt, -1)
-        m[pairs.direct_track] = pairs.mirror_track
-        mate.append(m)
-        mids_all.append(mids)
-    tracks = np.flatnonzero(np.any(np.stack(mate) >= 0, axis=0))
+    tracks = np.flatnonzero(np.any(mate >= 0, axis=0))
     if tracks.size < 10:
         raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
                               "in the first frames; are both mirrors visible and calibrated?")
@@ -222,22 +229,12 @@ def _add_late_markers(frames, camera, normals, ds, s, markers, first_pass):
     same marker found again and is not added."""
     first_blob, neutral, colour = markers
     F = len(frames)
-    dids, n_dt = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
+    dids, n_dt, partner, mids_all = _paired_tracks(frames, camera, normals, ds, s.band_px, 5)
     claimed = np.zeros(n_dt, bool)
     for t in range(F):
         ab = first_pass.assigned_blob[t]
         claimed[dids[t][ab[ab >= 0]]] = True
     K = len(normals)
-    partner = np.full((K, n_dt), -1)
-    mids_all = []
-    for k in range(K):
-        mids, _ = track_2d([f.mirror[k] for f in frames], [f.mirror_color[k] for f in frames])
-        plane = type("Plane", (), {"normal": normals[k], "d": ds[k]})()
-        pairs = pair_tracks([f.direct for f in frames], dids, [f.mirror[k] for f in frames], mids,
-                            [f.direct_color for f in frames], [f.mirror_color[k] for f in frames], camera, plane,
-                            band_px=s.band_px, min_frames=5)
-        partner[k, pairs.direct_track] = pairs.mirror_track
-        mids_all.append(mids)
     new_tracks = np.flatnonzero((partner >= 0).any(axis=0) & ~claimed)
     added_pos, added_col = [], []
     for tr in new_tracks.tolist():  # a one-time pass over the few new tracks, not a per-frame loop
