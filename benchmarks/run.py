@@ -30,6 +30,7 @@ import numpy as np
 from core.atomic import write_files_atomically
 
 from .extraction import run_extraction_benchmark
+from .tracking import run_tracking_benchmark
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
 from .speed import run_speed
 
@@ -120,7 +121,19 @@ def _extraction_summary(ext) -> list:
     return lines
 
 
-def _summary(speed, rows, expected, trials, seconds, ext=None) -> str:
+def _tracking_summary(trk) -> list:
+    lines = ["## Tracking from detections (300 markers, 150 frames, 10 deg head turn, 5 mm expressions)", "",
+             "| scenario | markers | RMS | identity switches | reported of visible | conjectured RMS / p99 / max "
+             "| candidates per marker | frames/s |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for name, r in trk.items():
+        lines.append(f"| {name} | {r['markers']} | {r['rms_mm']:.3f} mm | {r['identity_switches']} of "
+                     f"{r['measured']} | {r['reported_of_visible'] * 100:.1f} % | {r['conjectured_rms_mm']:.2f} / "
+                     f"{r['conjectured_p99_mm']:.2f} / {r['conjectured_max_mm']:.2f} mm | "
+                     f"{r['candidates_per_measured']:.2f} | {r['frames_per_s']:.0f} |")
+    return lines + [""]
+
+
+def _summary(speed, rows, expected, trials, seconds, ext=None, trk=None) -> str:
     sims = (f"{trials} trials per simulation setting, simulations took {seconds:.0f} s." if seconds else
             "Simulation results reused from the previous full run (`--skip-simulation`).")
     lines = ["# MirrorCap benchmark results", "",
@@ -158,6 +171,8 @@ def _summary(speed, rows, expected, trials, seconds, ext=None) -> str:
             lines.append("")
     if ext:
         lines += _extraction_summary(ext)
+    if trk:
+        lines += _tracking_summary(trk)
     if expected:
         lines += ["## Expected normal error (eq. 3.26) vs Monte Carlo (60 points, Gaussian noise)", "",
                   "| noise (px) | predicted (deg) | Monte Carlo (deg) | MC / predicted | worst configuration |",
@@ -178,6 +193,7 @@ def main(argv=None) -> int:
     parser.add_argument("--skip-simulation", action="store_true", help="no section 6.2 simulations")
     parser.add_argument("--skip-extraction", action="store_true", help="no marker-extraction benchmark")
     parser.add_argument("--stream-frames", type=int, default=10000, help="frames of the memory/stream test")
+    parser.add_argument("--skip-tracking", action="store_true", help="no tracking benchmark")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -219,7 +235,12 @@ def main(argv=None) -> int:
         with ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn")) as pool:
             ext = pool.submit(run_extraction_benchmark, args.stream_frames).result()
         files[out / "extraction.json"] = json.dumps(ext, indent=2) + "\n"
-    summary = _summary(speed, rows, expected, args.trials, seconds, ext)
+    trk = None
+    if not args.skip_tracking:
+        print("tracking from detections ...", flush=True)
+        trk = run_tracking_benchmark()
+        files[out / "tracking.json"] = json.dumps(trk, indent=2) + "\n"
+    summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
     files[out / "summary.md"] = summary
     write_files_atomically(files)
     print(summary)

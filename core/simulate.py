@@ -227,7 +227,8 @@ def rig_performance(rig: FaceRig, n_frames: int, head_motion_deg: float = 10.0, 
 
 def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_colors: int = 4, seed: int = 0,
                          head_motion_deg: float = 3.0, missing: float = 0.0, false_blobs: float = 0.0,
-                         performance=None):
+                         performance=None, occlusions: int = 0, occlusion_frames: int = 10,
+                         occlusion_radius_mm: float = 20.0):
     """Per-frame detections of ``rig`` under gentle head motion, without rendering:
     visible markers projected into each view with Gaussian noise, in shuffled order.
     ``missing`` drops that fraction of detections; ``false_blobs`` adds that many
@@ -257,12 +258,18 @@ def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_c
         col = np.where(ids >= 0, colors[np.maximum(ids, 0)], rng.integers(0, n_colors, len(ids)))
         return px[order], col[order], ids[order]
 
+    hidden = np.zeros((n_frames, n), bool)
+    for _ in range(occlusions):
+        centre = rng.integers(n)
+        group = np.linalg.norm(rig.points - rig.points[centre], axis=1) <= occlusion_radius_mm
+        start = rng.integers(0, max(1, n_frames - occlusion_frames))
+        hidden[start:start + occlusion_frames, group] = True
     for f in range(n_frames):
         if performance is None:
             pts, nrm = rig_motion(rig, f, n_frames, head_motion_deg)
         else:
             pts, nrm = performance[0][f], performance[1][f]
-        vis = visibility(rig.camera, rig.planes, pts, nrm)
+        vis = visibility(rig.camera, rig.planes, pts, nrm) & ~hidden[f][None]
         ids = np.arange(n)
         d = view(rig.camera.project(pts[vis[0]]), ids[vis[0]])
         ms = [view(rig.camera.project(reflect_points(pts[vis[1 + k]], *rig.planes[k])), ids[vis[1 + k]])

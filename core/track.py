@@ -47,7 +47,8 @@ from .pairing import pair_tracks, track_2d
 @dataclass
 class TrackSettings:
     band_px: float = 1.0  # mirrored epipolar band half-width (about 3 sigma of the detections)
-    gate_mm: float = 3.0  # a marker's candidate must lie this close to its prediction
+    gate_mm: float = 3.0  # largest distance between a marker's prediction and its candidate
+    min_gate_mm: float = 0.5  # each marker's gate: 4x its recent innovation + 0.3 mm, within these
     init_frames: int = 15  # frames used to pair direct and mirror tracks
     neighbour_radius_mm: float = 25.0  # neighbours in the neutral face (eq. 5.6-5.8)
     false_threshold: float = 3.0  # JF above this is false tracking (eq. 5.6)
@@ -287,6 +288,7 @@ def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, 
     head_frame = np.full((F, N, 3), np.nan)
     last_motion = np.zeros((N, 3))  # each marker's motion at its last measurement
     last_frame = np.full(N, -1)
+    innovation = np.full(N, s.gate_mm / 4.0)  # per marker, moving average; starts at the widest gate
     conjectured = np.zeros((F, N), bool)
     camera_mask = np.zeros((F, N), int)
     head_pose = np.zeros((F, 6))
@@ -302,6 +304,9 @@ def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, 
                                 [camera.normalize(m) for m in fr.mirror], fr.mirror_color, normals, ds,
                                 camera.focal_px, band_px=s.band_px, depth_range=depth_range)
         counts["candidates"][t] = len(cand.direct)
+        # each marker's gate follows how well it has been predicted lately: tight where
+        # predictions are good (fewer chance candidates), wide where the face moves fast
+        gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
         # one-to-one within each colour class: a marker only takes candidates of its colour
         a = np.full(N, -1)
         cand_colour = np.asarray(fr.direct_color)[cand.direct] if len(cand.direct) else np.zeros(0, int)
@@ -311,6 +316,8 @@ def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, 
             if cc.size:
                 got = assign_nearest(pred_cam[mk], cand.points[cc], s.gate_mm)
                 a[mk] = np.where(got >= 0, cc[np.maximum(got, 0)], -1)
+        near = np.linalg.norm(cand.points[np.maximum(a, 0)] - pred_cam, axis=1) if len(cand.points) else 0.0
+        a = np.where((a >= 0) & (near <= gate_i), a, -1)
         valid = a >= 0
         # conflicts: one 2D blob claimed by two markers -> keep the one closest to its prediction
         err = np.where(valid, np.linalg.norm(cand.points[np.maximum(a, 0)] - pred_cam, axis=1), np.inf)
@@ -322,6 +329,8 @@ def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, 
             counts["conflicts"][t] += loser.size
             valid[loser] = False
         meas_cam = cand.points[np.maximum(a, 0)]
+        innovation[valid] = 0.8 * innovation[valid] + 0.2 * np.linalg.norm(meas_cam[valid] - pred_cam[valid],
+                                                                             axis=1)
         use = valid if rigid is None else valid & np.isin(np.arange(N), rigid)
         if use.sum() >= 4:
             R_m, T_m = robust_rigid_fit(neutral[use], meas_cam[use])

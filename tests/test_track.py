@@ -83,3 +83,21 @@ def test_faults_missing_and_false_blobs(performance):
     assert np.all(result.camera_mask[result.conjectured] == 0)
     measured = np.all(np.isfinite(result.points), axis=2) & ~result.conjectured
     assert np.all(result.camera_mask[measured] & 1)
+
+
+def test_stress_harness_occlusions_false_candidates(performance):
+    """The issue's stress faults, harsher: 10 % of detections missing, half as many false
+    blobs as markers (~2.9 candidates per measured marker; the issue asks 1.2-2.3x),
+    twelve 10-frame occlusions of marker groups (20 mm), 10 deg head turn."""
+    rig, _ = performance
+    perf = rig_performance(rig, 150, head_motion_deg=10, expression_mm=5)
+    _, frames = synthetic_detections(rig, 150, seed=4, performance=perf, noise_px=0.1, missing=0.1, false_blobs=0.5,
+                                     occlusions=12, occlusion_frames=10)
+    result = track(frames, rig.camera, rig.planes)
+    s = _score(frames, perf, result)
+    ratio = result.stats["candidates"][1:].sum() / result.stats["measured"][1:].sum()
+    assert ratio > 2.3
+    assert s["rms"] < 0.2  # mm; measured 0.075
+    assert s["switches"] <= 0.0005 * s["measured"]  # measured 6 in 24,638, all to false blobs
+    assert s["reported_of_visible"] >= 0.98  # measured 98.3 %
+    assert s["conj_p99"] < 2.0  # measured 1.73 mm
