@@ -316,21 +316,22 @@ def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, 
             if cc.size:
                 got = assign_nearest(pred_cam[mk], cand.points[cc], s.gate_mm)
                 a[mk] = np.where(got >= 0, cc[np.maximum(got, 0)], -1)
-        near = np.linalg.norm(cand.points[np.maximum(a, 0)] - pred_cam, axis=1) if len(cand.points) else 0.0
+        # (a blank frame has no candidate: pad so that indexing stays valid; nothing is assigned)
+        cpts = cand.points if len(cand.points) else np.zeros((1, 3))
+        near = np.linalg.norm(cpts[np.maximum(a, 0)] - pred_cam, axis=1)
         a = np.where((a >= 0) & (near <= gate_i), a, -1)
         valid = a >= 0
         # conflicts: one 2D blob claimed by two markers -> keep the one closest to its prediction
-        err = np.where(valid, np.linalg.norm(cand.points[np.maximum(a, 0)] - pred_cam, axis=1), np.inf)
-        for key in [cand.direct] + [cand.mirror_blob[:, k] for k in range(cand.mirror_blob.shape[1])]:
+        err = np.where(valid, near, np.inf)
+        keys = [cand.direct] + [cand.mirror_blob[:, k] for k in range(cand.mirror_blob.shape[1])]
+        for key in keys if len(cand.points) else []:
             blob = np.where(valid, key[np.maximum(a, 0)], -1)
             order = np.lexsort((err, blob))
             dup = np.r_[False, (blob[order][1:] == blob[order][:-1]) & (blob[order][1:] >= 0)]
             loser = order[dup]
             counts["conflicts"][t] += loser.size
             valid[loser] = False
-        meas_cam = cand.points[np.maximum(a, 0)]
-        innovation[valid] = 0.8 * innovation[valid] + 0.2 * np.linalg.norm(meas_cam[valid] - pred_cam[valid],
-                                                                             axis=1)
+        meas_cam = cpts[np.maximum(a, 0)]
         use = valid if rigid is None else valid & np.isin(np.arange(N), rigid)
         if use.sum() >= 4:
             R_m, T_m = robust_rigid_fit(neutral[use], meas_cam[use])
@@ -345,6 +346,7 @@ def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, 
         counts["false_tracking"][t] = false.sum()
         valid &= ~false
         motion[false] = np.nan
+        innovation[valid] = 0.8 * innovation[valid] + 0.2 * near[valid]
         # markers seen before: their own last motion plus the neighbours' motion since;
         # never seen (or no such neighbour): eq. 5.8 from the neighbours' motion now
         since, filled_since = conjecture_since_last_seen(motion, valid, nidx, ndist, last_motion, last_frame,
@@ -364,10 +366,11 @@ def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, 
         conjectured[t] = filled
         counts["conjectured"][t] = filled.sum()
         counts["measured"][t] = valid.sum()
-        blobs = cand.mirror_blob[np.maximum(a, 0)]
-        mask = 1 | ((blobs[:, 0] >= 0) << 1) | (((blobs[:, 1] >= 0) << 2) if blobs.shape[1] > 1 else 0)
-        camera_mask[t] = np.where(valid, mask, 0)
-        assigned_blob[t] = np.where(valid, cand.direct[np.maximum(a, 0)], -1)
+        if len(cand.points):
+            blobs = cand.mirror_blob[np.maximum(a, 0)]
+            mask = 1 | ((blobs[:, 0] >= 0) << 1) | (((blobs[:, 1] >= 0) << 2) if blobs.shape[1] > 1 else 0)
+            camera_mask[t] = np.where(valid, mask, 0)
+            assigned_blob[t] = np.where(valid, cand.direct[np.maximum(a, 0)], -1)
         if progress:
             progress(t + 1, F)
     labels = [f"m{i:03d}" for i in range(N)]
