@@ -23,6 +23,9 @@ SCENARIOS = {
 
 
 def score(frames, perf, result) -> dict:
+    """Accuracy of a tracking result against the synthetic truth. Each tracked marker's
+    true identity (``ids``) is the majority of the true markers it was assigned; an
+    identity switch is a measurement of any other (or of a false blob)."""
     F, N = result.points.shape[:2]
     votes = [[] for _ in range(N)]
     for t in range(F):
@@ -34,6 +37,8 @@ def score(frames, perf, result) -> dict:
     for t in range(F):
         ab = result.assigned_blob[t]
         ok = ab >= 0
+        if not ok.any():
+            continue
         switches += int(np.count_nonzero(ok & (frames[t].direct_id[np.maximum(ab, 0)] != ids)))
         measured += int(ok.sum())
     err = np.linalg.norm(result.points - perf[0][:, np.maximum(ids, 0)], axis=2)
@@ -46,7 +51,7 @@ def score(frames, perf, result) -> dict:
         vis_total += len(seen)
         rep_vis += int(np.sum(reported[t] & np.isin(ids, list(seen))))
     ce = err[result.conjectured]
-    return {"markers": N, "measured": measured, "identity_switches": switches,
+    return {"ids": ids, "markers": N, "measured": measured, "identity_switches": switches,
             "rms_mm": float(np.sqrt(np.mean(err[meas] ** 2))), "reported_of_visible": rep_vis / vis_total,
             "conjectured_rms_mm": float(np.sqrt(np.mean(ce ** 2))) if ce.size else 0.0,
             "conjectured_p99_mm": float(np.percentile(ce, 99)) if ce.size else 0.0,
@@ -65,6 +70,7 @@ def run_tracking_benchmark(n_frames: int = 150, progress=print) -> dict:
         result = track(frames, rig.camera, rig.planes)
         elapsed = time.perf_counter() - t0
         r = score(frames, perf, result)
+        del r["ids"]
         r["frames_per_s"] = n_frames / elapsed
         out[name] = r
         progress(f"  {name:60s} rms {r['rms_mm']:.3f} mm  switches {r['identity_switches']}/{r['measured']}  "

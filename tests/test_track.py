@@ -6,40 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.tracking import score
 from core.simulate import face_rig, rig_performance, synthetic_detections
 from core.track import TrackSettings, track
 
 
 def _score(frames, perf, result):
-    F, N = result.points.shape[:2]
-    votes = [[] for _ in range(N)]
-    for t in range(F):
-        for n, b in enumerate(result.assigned_blob[t].tolist()):
-            if b >= 0:
-                votes[n].append(int(frames[t].direct_id[b]))
-    ids = np.array([max(set(v), key=v.count) if v else -1 for v in votes])
-    switches = measured = 0
-    for t in range(F):
-        ab = result.assigned_blob[t]
-        ok = ab >= 0
-        if not ok.any():
-            continue
-        switches += np.count_nonzero(ok & (frames[t].direct_id[np.maximum(ab, 0)] != ids))  # to another marker
-        measured += ok.sum()
-    err = np.linalg.norm(result.points - perf[0][:, np.maximum(ids, 0)], axis=2)
-    meas = np.all(np.isfinite(result.points), axis=2) & ~result.conjectured & (ids >= 0)[None]
-    reported = np.all(np.isfinite(result.points), axis=2)
-    visible_total = reported_visible = 0
-    for t in range(F):
-        seen = (set(frames[t].direct_id.tolist())
-                & (set(frames[t].mirror_id[0].tolist()) | set(frames[t].mirror_id[1].tolist()))) - {-1}
-        visible_total += len(seen)
-        reported_visible += int(np.sum(reported[t] & np.isin(ids, list(seen))))
-    conj_err = err[result.conjectured] if result.conjectured.any() else np.zeros(1)
-    return {"ids": ids, "switches": switches, "measured": measured,
-            "reported_of_visible": reported_visible / visible_total, "conj_p99": float(np.percentile(conj_err, 99)),
-            "rms": float(np.sqrt(np.mean(err[meas] ** 2))),
-            "conj_rms": float(np.sqrt(np.mean(err[result.conjectured] ** 2))) if result.conjectured.any() else 0.0}
+    """The benchmark's scoring (benchmarks/tracking.py), under the tests' short names."""
+    r = score(frames, perf, result)
+    return {"ids": r["ids"], "switches": r["identity_switches"], "measured": r["measured"], "rms": r["rms_mm"],
+            "conj_rms": r["conjectured_rms_mm"], "conj_p99": r["conjectured_p99_mm"],
+            "reported_of_visible": r["reported_of_visible"]}
 
 
 @pytest.fixture(scope="module")
