@@ -113,7 +113,7 @@ def run_extraction_benchmark(stream_frames: int = 10000, progress=print) -> dict
         writer.release()
         source = open_source(path)
         t0 = time.perf_counter()
-        for k, _ in source.frames(0, min(2000, stream_frames)):
+        for _ in source.frames(0, min(2000, stream_frames)):
             pass
         decode = (time.perf_counter() - t0) / min(2000, stream_frames)
         out["decode_ms_per_frame"] = decode * 1e3

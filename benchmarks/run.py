@@ -25,8 +25,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from core.atomic import write_files_atomically
 
 from .extraction import run_extraction_benchmark

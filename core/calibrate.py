@@ -117,7 +117,7 @@ def calibrate_camera(source: VideoSource, board: Board, *, max_views: int = 40, 
         raise InputError("at least 3 views are needed for a calibration")
     step = max(1, source.frame_count // max_views)
     obj_pts, img_pts, tried = [], [], 0
-    for n, frame in source.frames(0, None, step):
+    for _, frame in source.frames(0, None, step):
         tried += 1
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         found = detect_board(gray, board)

@@ -49,15 +49,15 @@ class FrameTruth:
     color: np.ndarray  # (N,) class index
 
 
-def render_rig_frame(camera: Camera, planes, points, color_index, class_rgb, settings: RenderSettings = RenderSettings(),
+def render_rig_frame(camera: Camera, planes, points, color_index, class_rgb, settings: RenderSettings | None = None,
                      rng=None, visible=None):
     """Render one frame. ``points`` ``(N, 3)`` mm; ``color_index`` ``(N,)`` into
     ``class_rgb`` ``(C, 3)`` (RGB 0..255); ``visible`` ``(3, N)`` optional per-view
     visibility (e.g. from surface normals). Returns ``(bgr uint8 image, FrameTruth)``."""
+    settings = settings or RenderSettings()
     rng = np.random.default_rng(0) if rng is None else rng
     w, h = camera.image_size
     pts = np.asarray(points, dtype=float)
-    n = pts.shape[0]
     views = [pts] + [reflect_points(pts, nrm, d) for nrm, d in planes]
     centres = np.stack([camera.project(v) for v in views])  # (V, N, 2)
     depth = np.stack([v[:, 2] for v in views])
@@ -207,7 +207,7 @@ def render_board_views(camera: Camera, board, n_views: int, rng=None, distance_m
     return images
 
 
-def rig_clip_frames(rig, n_frames: int, settings: RenderSettings = RenderSettings(), seed: int = 0,
+def rig_clip_frames(rig, n_frames: int, settings: RenderSettings | None = None, seed: int = 0,
                     class_rgb=None, head_motion_deg: float = 3.0):
     """Yield ``(frame_number, bgr image, FrameTruth)`` for a synthetic clip of a
     :class:`core.simulate.FaceRig`: the face turns gently (a sinusoid of

@@ -168,7 +168,7 @@ def self_calibrate_mirror(frames, camera: Camera, mirror: int, *, threshold_px: 
     if best_u is None:
         raise DegenerateError(f"mirror {mirror}: no mirror plane hypothesis could be formed")
     u, pairs, t_px = best_u, None, threshold_px
-    for step in range(6):
+    for _ in range(6):
         pairs = _one_to_one(cand_all, u, t_px / f)
         if pairs.size < 6:
             raise DegenerateError(f"mirror {mirror}: fewer than 6 consistent marker pairs; the mirror is "

@@ -53,9 +53,9 @@ def test_load_and_errors(tmp_path):
         "image size": json.dumps({**good, "image_size": [720]}),
         "non-integer size": json.dumps({**good, "image_size": [720.5, 720]}),
         "not an object": json.dumps([1, 2, 3]),
-        "nan": json.dumps({**good, "dist": [float("nan"), 0, 0, 0]}).replace("NaN", "NaN"),
+        "nan": json.dumps({**good, "dist": [float("nan"), 0, 0, 0]}),
     }
-    for name, text in cases.items():
+    for text in cases.values():
         path.write_text(text)
         with pytest.raises(InputError):
             Camera.load(path)

@@ -178,7 +178,7 @@ def test_view_split_by_gaps_and_rig_file(rig, tmp_path):
 def test_clip_frames_move_and_keep_truth(rig):
     frames = list(rig_clip_frames(rig, 3, RenderSettings(), seed=0))
     assert len(frames) == 3
-    (_, a, ta), (_, b, tb) = frames[0], frames[1]
+    (_, a, ta), (_, _, tb) = frames[0], frames[1]
     assert a.shape == (720, 1280, 3) and a.dtype == np.uint8
     moved = np.linalg.norm(ta.centres - tb.centres, axis=-1)[ta.visible & tb.visible]
     assert moved.max() > 0.5  # the head turns between frames
