@@ -110,47 +110,60 @@ def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int)
     return dids, n_dt, partner, mids_all
 
 
-def _initial_markers(frames, camera, normals, ds, settings):
-    """Step 2: markers are direct-view tracks paired with a mirror track over the first
-    ``init_frames`` frames. Each marker's neutral position is its 3D position at the
-    first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
-    markers both frames share (so markers hidden at frame 0 are tracked too).
-    Returns the marker's frame-0 direct blob (-1 if absent), the neutral structure
-    (N, 3) and the per-frame direct blob of each marker over the window (W, N)."""
-    W = min(settings.init_frames, len(frames))
-    init = frames[:W]
-    dids, n_dt, mate, mids_all = _paired_tracks(init, camera, normals, ds, settings.band_px, min(5, W))
-    K = len(normals)
-    tracks = np.flatnonzero(np.any(mate >= 0, axis=0))
-    if tracks.size < 10:
-        raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
-                              "in the first frames; are both mirrors visible and calibrated?")
-    col = {t: i for i, t in enumerate(tracks.tolist())}
-    pos = np.full((W, tracks.size, 3), np.nan)  # 3D per window frame, own frame's camera coordinates
-    blob = np.full((W, tracks.size), -1)
-    for f in range(W):
-        here = np.array([col.get(t, -1) for t in dids[f].tolist()], int)
+def _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all, tracks):
+    """3D position of chosen direct tracks in every frame where the track and one of
+    its partner mirror tracks both have a blob (fused over mirrors): ``pos (F, M, 3)``
+    (NaN elsewhere, each frame's own camera coordinates), the direct blob per frame
+    ``(F, M)`` (-1: absent) and each track's colour ``(M,)``. Vectorised per frame
+    through lookup arrays."""
+    F, M, K = len(frames), len(tracks), len(normals)
+    col_of = np.full(n_dt, -1)
+    col_of[tracks] = np.arange(M)
+    n_mt = [1 + max((int(m.max()) for m in mids_all[k] if len(m)), default=0) for k in range(K)]
+    pos = np.full((F, M, 3), np.nan)
+    blob = np.full((F, M), -1)
+    colour = np.full(M, -1)
+    for f in range(F):
+        here = col_of[dids[f]] if len(dids[f]) else np.zeros(0, int)
         sel = np.flatnonzero(here >= 0)
         if sel.size == 0:
             continue
         marker = here[sel]
         blob[f, marker] = sel
+        unset = colour[marker] < 0
+        colour[marker[unset]] = np.asarray(frames[f].direct_color)[sel[unset]]
         vis = np.zeros((K, sel.size), bool)
         pm = np.zeros((K, sel.size, 2))
         for k in range(K):
-            lookup = {t: j for j, t in enumerate(mids_all[k][f].tolist())}
-            j = np.array([lookup.get(mate[k][tracks[mk]], -1) for mk in marker], int)
+            blob_of = np.full(n_mt[k], -1)
+            blob_of[mids_all[k][f]] = np.arange(len(mids_all[k][f]))
+            mate = partner[k, tracks[marker]]
+            j = np.where(mate >= 0, blob_of[np.maximum(mate, 0)], -1)
             vis[k] = j >= 0
             if vis[k].any():
-                pm[k, vis[k]] = camera.normalize(init[f].mirror[k][j[vis[k]]])
+                pm[k, vis[k]] = camera.normalize(frames[f].mirror[k][j[vis[k]]])
         ok = vis.any(axis=0)
         if ok.any():
-            pos[f, marker[ok]] = points_from_planes(camera.normalize(init[f].direct[sel[ok]]), pm[:, ok],
+            pos[f, marker[ok]] = points_from_planes(camera.normalize(frames[f].direct[sel[ok]]), pm[:, ok],
                                                     normals, ds, visible=vis[:, ok])
-    colour = np.full(tracks.size, -1)
-    for f in range(W - 1, -1, -1):  # each marker's colour: its direct blob's class, earliest frame wins
-        seen = blob[f] >= 0
-        colour[seen] = np.asarray(init[f].direct_color)[blob[f, seen]]
+    return pos, blob, colour
+
+
+def _initial_markers(frames, camera, normals, ds, settings):
+    """Step 2: markers are direct-view tracks paired with a mirror track over the first
+    ``init_frames`` frames. Each marker's neutral position is its 3D position at the
+    first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
+    markers both frames share (so markers hidden at frame 0 are tracked too).
+    Returns each marker's frame-0 direct blob (-1 if absent), the neutral structure
+    (N, 3) and the markers' colour classes (N,)."""
+    W = min(settings.init_frames, len(frames))
+    init = frames[:W]
+    dids, n_dt, partner, mids_all = _paired_tracks(init, camera, normals, ds, settings.band_px, min(5, W))
+    tracks = np.flatnonzero(np.any(partner >= 0, axis=0))
+    if tracks.size < 10:
+        raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
+                              "in the first frames; are both mirrors visible and calibrated?")
+    pos, blob, colour = _track_positions(init, camera, normals, ds, dids, n_dt, partner, mids_all, tracks)
     neutral = pos[0].copy()
     known = np.all(np.isfinite(neutral), axis=1)
     for f in range(1, W):
@@ -195,6 +208,69 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.rigid = given
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
     return _keep_measured(result, s.min_measured_frames)
+
+
+def _keep_measured(result: TrackResult, min_frames: int) -> TrackResult:
+    """A marker must earn its place: one measured in fewer than ``min_frames`` frames
+    is dropped (a pairing that never matched real candidates), and nothing is
+    reported for a marker before its first measurement."""
+    measured = result.assigned_blob >= 0
+    keep = np.flatnonzero(measured.sum(axis=0) >= min_frames)
+    first = np.argmax(measured, axis=0)
+    before = np.arange(measured.shape[0])[:, None] < first[None, :]
+    result.points[before] = np.nan
+    result.head_frame[before] = np.nan
+    result.conjectured[before] = False
+    result.camera_mask[before] = 0
+    old_to_new = np.full(measured.shape[1], -1)
+    old_to_new[keep] = np.arange(keep.size)
+    rigid = old_to_new[result.rigid]
+    result.rigid = rigid[rigid >= 0]
+    for name in ("points", "conjectured", "camera_mask", "assigned_blob", "head_frame"):
+        setattr(result, name, getattr(result, name)[:, keep])
+    for name in ("neutral", "first_blob", "colour"):
+        setattr(result, name, getattr(result, name)[keep])
+    result.labels = [f"m{i:03d}" for i in range(keep.size)]
+    result.stats["markers_dropped_unmeasured"] = np.array([measured.shape[1] - keep.size])
+    return result
+
+
+def _add_late_markers(frames, camera, normals, ds, s, markers, first_pass):
+    """Markers the initial window missed (hidden at the start, turned into view later):
+    direct-view tracks over the whole clip that pair with a mirror track but were never
+    claimed by a tracked marker. Each enters at its head-frame position when first
+    paired (the first pass's head pose); one within 4 mm of an existing (or an earlier
+    added) marker is the same marker found again and is not added."""
+    from scipy.spatial import cKDTree
+
+    first_blob, neutral, colour = markers
+    F = len(frames)
+    dids, n_dt, partner, mids_all = _paired_tracks(frames, camera, normals, ds, s.band_px, 5)
+    claimed = np.zeros(n_dt, bool)
+    for t in range(F):
+        ab = first_pass.assigned_blob[t]
+        claimed[dids[t][ab[ab >= 0]]] = True
+    new_tracks = np.flatnonzero((partner >= 0).any(axis=0) & ~claimed)
+    if new_tracks.size == 0:
+        return markers
+    pos, _, new_colour = _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all, new_tracks)
+    seen = np.all(np.isfinite(pos), axis=2)  # (F, M)
+    has = seen.any(axis=0)
+    first = np.argmax(seen, axis=0)
+    X = pos[first, np.arange(new_tracks.size)]
+    pose = first_pass.head_pose[first]
+    R = rotation_zyx(pose[:, :3])  # (M, 3, 3)
+    head = np.einsum("mji,mj->mi", R, X - pose[:, 3:])  # R^T (X - T): into the head frame of frame 0
+    head, new_colour = head[has], new_colour[has]
+    far = cKDTree(neutral).query(head)[0] > 4.0 if len(head) else np.zeros(0, bool)
+    keep = []
+    for q in np.flatnonzero(far):  # the few candidates left, against each other
+        if not keep or np.min(np.linalg.norm(head[keep] - head[q], axis=1)) > 4.0:
+            keep.append(q)
+    if not keep:
+        return markers
+    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, head[keep]]),
+            np.r_[colour, new_colour[keep]])
 
 
 def _keep_measured(result: TrackResult, min_frames: int) -> TrackResult:
