@@ -124,22 +124,24 @@ def pair_tracks(direct_xy, direct_ids, mirror_xy, mirror_ids, direct_color, mirr
     support = np.bincount(inv)
     rms = np.sqrt(np.bincount(inv, sq) / support)
     dt, mt = uk // n_mt, uk % n_mt
-    # frames in which both tracks exist
-    life_d = _lifetimes(direct_ids)
-    life_m = _lifetimes(mirror_ids)
-    both = np.array([len(life_d[a] & life_m[b]) for a, b in zip(dt.tolist(), mt.tolist())])
+    # frames in which both tracks exist: a product of (frame x track) presence matrices
+    both = np.asarray(_presence(direct_ids).T.dot(_presence(mirror_ids)).tocsr()[dt, mt]).ravel()
     ok = (support >= min_frames) & (support >= min_agreement * both)
     dt, mt, rms, support = dt[ok], mt[ok], rms[ok], support[ok]
     if rms.size:
         close = rms <= max_rms_factor * np.median(rms)
         dt, mt, rms, support = dt[close], mt[close], rms[close], support[close]
-    # ambiguity: a rival partner with comparable support
-    ambiguous = []
-    for a in np.unique(dt):
-        sup = np.sort(support[dt == a])[::-1]
-        if sup.size > 1 and sup[1] > ambiguity_ratio * sup[0]:
-            ambiguous.append(a)
-    ambiguous = np.array(ambiguous, int)
+    # ambiguity: a rival partner with comparable support (best and second best per direct track)
+    order = np.lexsort((-support, dt))
+    ds_sorted, sup_sorted = dt[order], support[order]
+    starts = np.flatnonzero(np.r_[True, ds_sorted[1:] != ds_sorted[:-1]])
+    sizes = np.diff(np.r_[starts, ds_sorted.size])
+    rival = sizes > 1
+    if ds_sorted.size:
+        second = sup_sorted[np.minimum(starts + 1, ds_sorted.size - 1)]
+        ambiguous = ds_sorted[starts][rival & (second > ambiguity_ratio * sup_sorted[starts])]
+    else:
+        ambiguous = np.zeros(0, int)
     keep = ~np.isin(dt, ambiguous)
     dt, mt, rms, support = dt[keep], mt[keep], rms[keep], support[keep]
     if dt.size == 0:
@@ -151,15 +153,20 @@ def pair_tracks(direct_xy, direct_ids, mirror_xy, mirror_ids, direct_color, mirr
     cost[dinv, minv] = rms - 1e-3 * support  # prefer closer, then longer-supported pairs
     r, c = linear_sum_assignment(cost)
     good = cost[r, c] < 1e9
-    sel = {(a, b) for a, b in zip(ud[r[good]].tolist(), um[c[good]].tolist())}
-    pick = np.array([(a, b) in sel for a, b in zip(dt.tolist(), mt.tolist())])
+    index = np.full(cost.shape, -1)
+    index[dinv, minv] = np.arange(dt.size)
+    pick = index[r[good], c[good]]  # rows come sorted, so pairs stay in direct-track order
     return TrackPairs(dt[pick], mt[pick], rms[pick], support[pick], ambiguous)
 
 
-def _lifetimes(ids_per_frame) -> dict:
-    """track id -> set of frames in which it has a detection."""
-    life: dict = {}
-    for f, ids in enumerate(ids_per_frame):
-        for t in np.unique(np.asarray(ids)).tolist():
-            life.setdefault(t, set()).add(f)
-    return life
+def _presence(ids_per_frame):
+    """Sparse (frames x tracks) matrix: 1 where a track has a detection in a frame."""
+    from scipy.sparse import csr_matrix
+
+    frames = np.concatenate([np.full(len(ids), f) for f, ids in enumerate(ids_per_frame)])
+    tracks = np.concatenate([np.asarray(ids, int) for ids in ids_per_frame])
+    n_tracks = int(tracks.max()) + 1 if tracks.size else 1
+    m = csr_matrix((np.ones(tracks.size), (frames, tracks)), shape=(len(ids_per_frame), n_tracks))
+    m.sum_duplicates()
+    m.data[:] = 1.0
+    return m
