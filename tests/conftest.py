@@ -42,3 +42,28 @@ def distorted_camera():
 @pytest.fixture
 def face():
     return sim.face_rig(n_markers=300, seed=3)
+
+
+def write_rig_clip(root: Path, n_frames: int, name: str = "{:03d}.png", mp4=None):
+    """Render a 300-marker rig clip (2 grey levels of noise, gentle head turn) into
+    ``root/png`` (file names from ``name``), optionally also as an MP4 at 25 frames/s,
+    and write ``root/camera.json``. Returns ``(rig, per-frame truth)``."""
+    import json
+
+    import cv2
+
+    from core.render import RenderSettings, rig_clip_frames
+
+    rig = sim.face_rig(n_markers=300, seed=3, layout="even")
+    (root / "png").mkdir()
+    writer = cv2.VideoWriter(str(mp4), cv2.VideoWriter_fourcc(*"mp4v"), 25, rig.camera.image_size) if mp4 else None
+    truths = []
+    for f, img, truth in rig_clip_frames(rig, n_frames, RenderSettings(noise_sigma=2.0), seed=1):
+        cv2.imwrite(str(root / "png" / name.format(f)), img)
+        if writer is not None:
+            writer.write(img)
+        truths.append(truth)
+    if writer is not None:
+        writer.release()
+    (root / "camera.json").write_text(json.dumps(rig.camera.to_dict()))
+    return rig, truths

@@ -14,8 +14,8 @@ from core.camera import Camera
 from core.detect import read_detections
 from core.errors import InputError, MirrorCapError
 from core.markers import ColorClasses
-from core.render import RenderSettings, match_detections, render_board_views, rig_clip_frames
-from core.simulate import face_rig
+from core.render import match_detections, render_board_views
+from conftest import write_rig_clip
 from core.video import open_source, parse_frame_range
 
 N_FRAMES = 8
@@ -25,16 +25,7 @@ N_FRAMES = 8
 def clip(tmp_path_factory):
     """An 8-frame synthetic rig clip as a PNG folder and an MP4, with truth."""
     root = tmp_path_factory.mktemp("clip")
-    rig = face_rig(n_markers=300, seed=3, layout="even")
-    (root / "png").mkdir()
-    writer = cv2.VideoWriter(str(root / "clip.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 25, (1280, 720))
-    truths = []
-    for f, img, truth in rig_clip_frames(rig, N_FRAMES, RenderSettings(noise_sigma=2.0), seed=1):
-        cv2.imwrite(str(root / "png" / f"frame_{f}.png"), img)
-        writer.write(img)
-        truths.append(truth)
-    writer.release()
-    (root / "camera.json").write_text(json.dumps(rig.camera.to_dict()))
+    _, truths = write_rig_clip(root, N_FRAMES, name="frame_{}.png", mp4=root / "clip.mp4")
     return root, truths
 
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from core import cli
-from core.render import RenderSettings, rig_clip_frames
-from core.simulate import face_rig, rig_motion
+from conftest import write_rig_clip
+from core.simulate import rig_motion
 
 N_FRAMES = 30
 
@@ -19,11 +19,7 @@ N_FRAMES = 30
 @pytest.fixture(scope="module")
 def rig_clip(tmp_path_factory):
     root = tmp_path_factory.mktemp("trackclip")
-    rig = face_rig(n_markers=300, seed=3, layout="even")
-    (root / "png").mkdir()
-    for f, img, _ in rig_clip_frames(rig, N_FRAMES, RenderSettings(noise_sigma=2.0), seed=1):
-        cv2.imwrite(str(root / "png" / f"{f:03d}.png"), img)
-    (root / "camera.json").write_text(json.dumps(rig.camera.to_dict()))
+    rig, _ = write_rig_clip(root, N_FRAMES)
     mirrors = {"mirrors": [{"mirror": k, "normal": n.tolist(), "d": float(d)} for k, (n, d) in enumerate(rig.planes)]}
     (root / "mirrors.json").write_text(json.dumps(mirrors))
     return root, rig
