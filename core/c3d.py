@@ -143,3 +143,98 @@ def c3d_bytes(labels, points, rate: float, units: str = "mm", residual=None, cam
 def write_c3d(path, labels, points, rate: float, **kwargs) -> None:
     """Write a take to ``path`` atomically (see :func:`c3d_bytes`)."""
     write_files_atomically({path: c3d_bytes(labels, points, rate, **kwargs)})
+
+
+def _parse_parameters(raw: bytes) -> dict:
+    """``{(GROUP, NAME): (dtype, dims, data bytes)}`` from a parameter section (after its 4-byte header)."""
+    groups, params, pos = {}, {}, 0
+    while pos + 4 <= len(raw):
+        n_chars, gid = struct.unpack("<bb", raw[pos:pos + 2])
+        if n_chars == 0:
+            break
+        name = raw[pos + 2:pos + 2 + abs(n_chars)].decode("ascii", "replace").upper()
+        off_pos = pos + 2 + abs(n_chars)
+        offset = struct.unpack("<h", raw[off_pos:off_pos + 2])[0]
+        body = off_pos + 2
+        if gid < 0:
+            groups[-gid] = name
+        else:
+            dtype, nd = struct.unpack("<bb", raw[body:body + 2])
+            dims = list(raw[body + 2:body + 2 + nd])
+            size = abs(dtype) * int(np.prod(dims)) if dims else abs(dtype)
+            start = body + 2 + nd
+            params[(gid, name)] = (dtype, dims, raw[start:start + size])
+        if offset == 0:
+            break
+        pos = off_pos + offset
+    return {(groups.get(g, str(g)), n): v for (g, n), v in params.items()}
+
+
+def _strings(entry) -> list:
+    dtype, dims, data = entry
+    if dtype != -1:
+        raise InputError("a C3D label parameter is not text")
+    if len(dims) < 2:
+        return [data.decode("ascii", "replace").strip()]
+    w = dims[0]
+    return [data[i * w:(i + 1) * w].decode("ascii", "replace").strip() for i in range(dims[1])]
+
+
+def read_c3d(path) -> dict:
+    """Read a C3D take (Intel byte order; floating-point or integer point data).
+
+    Returns ``{"labels", "points" (F, M, 3) with NaN in gaps, "conjectured" (F, M),
+    "rate", "units"}``. Raises :class:`InputError` with one message for anything else.
+    """
+    from pathlib import Path
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"take {path} does not exist")
+    raw = path.read_bytes()
+    if len(raw) < 2 * BLOCK or raw[1] != 0x50:
+        raise InputError(f"{path} is not a C3D file")
+    pblock = raw[0]
+    pstart = (pblock - 1) * BLOCK
+    if pstart + 4 > len(raw) or raw[pstart + 3] != 84:
+        raise InputError(f"{path}: only Intel-format C3D files are supported")
+    n_blocks = raw[pstart + 2]
+    params = _parse_parameters(raw[pstart + 4:pstart + n_blocks * BLOCK])
+
+    def number(group, name, fmt):
+        entry = params.get((group, name))
+        if entry is None:
+            raise InputError(f"{path}: the C3D parameter {group}:{name} is missing")
+        return struct.unpack("<" + fmt, entry[2][:struct.calcsize(fmt)])[0]
+
+    n_points = number("POINT", "USED", "h")
+    scale = number("POINT", "SCALE", "f")
+    rate = number("POINT", "RATE", "f")
+    data_start = number("POINT", "DATA_START", "H")
+    n_frames = number("POINT", "FRAMES", "H")
+    labels = []
+    for suffix in [""] + [str(i) for i in range(2, 2 + n_points // 255 + 1)]:
+        if ("POINT", "LABELS" + suffix) in params:
+            labels += _strings(params[("POINT", "LABELS" + suffix)])
+    labels = labels[:n_points]
+    if len(labels) < n_points:
+        labels += [f"marker{i:03d}" for i in range(len(labels), n_points)]
+    units = _strings(params[("POINT", "UNITS")])[0] if ("POINT", "UNITS") in params else "mm"
+    analog_used = number("ANALOG", "USED", "h") if ("ANALOG", "USED") in params else 0
+    if analog_used:
+        raise InputError(f"{path}: C3D files with analog channels are not supported")
+    itemsize = 4 if scale < 0 else 2
+    start = (data_start - 1) * BLOCK
+    count = n_frames * n_points * 4
+    if start + count * itemsize > len(raw):
+        raise InputError(f"{path}: the C3D data section is shorter than {n_frames} frames of {n_points} markers")
+    dtype = "<f4" if scale < 0 else "<i2"
+    data = np.frombuffer(raw, dtype=dtype, count=count, offset=start).astype(np.float64).reshape(n_frames, n_points, 4)
+    if scale > 0:
+        data[..., :3] *= scale
+    fourth = data[..., 3]
+    gap = fourth < 0
+    pts = data[..., :3].copy()
+    pts[gap] = np.nan
+    return {"labels": labels, "points": pts, "conjectured": (fourth == 0) & ~gap, "rate": float(rate),
+            "units": units}

@@ -16,6 +16,8 @@ Commands:
     colour classes learned from sample frames.
 ``mirrorcap demo [--out DIR]``
     the main job on the embedded sample.
+``mirrorcap bake TAKE.c3d --head HEAD.blend -o OUT.blend [--mode frames|pca] [--modes K]``
+    (needs bpy; defined in the package's ``cli.py``) the take as shape keys on the head.
 
 Bad input exits with status 2 and one line ``mirrorcap: error: ...`` on stderr;
 no output file is written.
@@ -210,7 +212,8 @@ def _source_options(parser, what: str = "video file, image folder or glob", fram
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(extra_commands=None) -> argparse.ArgumentParser:
+    """The parser of every core command; ``extra_commands(sub)`` adds more (the Blender ones)."""
     parser = argparse.ArgumentParser(
         prog="mirrorcap",
         description="MirrorCap: facial capture from one camera and two mirrors.",
@@ -303,11 +306,13 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out", help="folder for the demo's outputs (default out/)")
     demo.add_argument("-q", "--quiet", action="store_true")
     demo.set_defaults(func=_cmd_demo)
+    if extra_commands is not None:
+        extra_commands(sub)
     return parser
 
 
-def main(argv=None) -> int:
-    parser = build_parser()
+def main(argv=None, extra_commands=None) -> int:
+    parser = build_parser(extra_commands)
     args = parser.parse_args(argv)
     if getattr(args, "threshold", 1.0) <= 0:
         parser.error("--threshold must be positive")

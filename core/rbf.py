@@ -100,6 +100,22 @@ class RBFScattering:
             out[..., s:s + chunk, :] = np.einsum("mj,...jd->...md", basis, coef)
         return out
 
+    def influence_matrix(self, points) -> np.ndarray:
+        """The linear map of eq. 7.1-7.2 from control displacements to displacements at
+        ``points``: ``(m, n)`` with ``f(points) = E @ u``. Its rows sum to 1 and it
+        reproduces affine fields, since the system's affine part is exact."""
+        from scipy.linalg import lu_solve
+        from scipy.spatial.distance import cdist
+
+        if self._scipy_kernel is not None:
+            raise InputError("influence_matrix needs the paper's kernel (kernel='exp')")
+        p = np.asarray(points, dtype=float)
+        rhs = np.zeros((self.n + 4, self.n))
+        rhs[: self.n] = np.eye(self.n)
+        inv = lu_solve(self._lu, rhs)                                   # (n + 4, n)
+        basis = np.c_[np.exp(-cdist(p, self.centres) / self.k), p, np.ones(len(p))]
+        return basis @ inv
+
     def __call__(self, points, displacements) -> np.ndarray:
         """Scatter ``displacements`` (at the control points) to ``points``."""
         if self._scipy_kernel is not None:

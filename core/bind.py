@@ -1,0 +1,178 @@
+"""Registering a take to a head (the step between the 3D take and the face rig).
+
+1. Head motion is removed: each frame's markers are brought into the neutral
+   frame's head pose, from the take's own head pose (REPORT.json, ``camera = R p + t``)
+   or, without one, by a robust rigid fit of every frame to the neutral frame
+   (iteratively reweighted Arun fit, the weight-compensated idea of Rurainsky &
+   Eisert, section 3.3: markers that deform get down-weighted).
+2. Markers whose labels name a landmark of the head (``nose_tip`` or ``lm_nose_tip``
+   for the group ``lm_nose_tip``) anchor one similarity transform (Umeyama) from
+   the take's neutral frame to the head.
+3. Every other marker binds to its nearest head vertex on the skin (not eyeballs,
+   teeth or the inner lip), one marker per vertex (linear assignment).
+
+The rig then receives each marker's displacement from the neutral frame, in
+head millimetres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .head import HeadModel
+from .motion import rigid_fit
+
+
+def similarity_fit(A, B):
+    """``s, R, t`` minimising ``sum |s R a_i + t - b_i|^2`` (Umeyama 1991)."""
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    ca, cb = A.mean(0), B.mean(0)
+    a, b = A - ca, B - cb
+    U, S, Vt = np.linalg.svd(b.T @ a / len(A))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ D @ Vt
+    var = (a ** 2).sum() / len(A)
+    s = float(np.trace(np.diag(S) @ D) / var)
+    return s, R, cb - s * R @ ca
+
+
+def fill_gaps(points) -> np.ndarray:
+    """Linear interpolation in time of NaN gaps ``(F, M, 3)``; ends hold the nearest value."""
+    p = np.array(points, float)
+    F, M, _ = p.shape
+    valid = np.all(np.isfinite(p), axis=2)
+    if valid.all():
+        return p
+    if not valid.any(axis=0).all():
+        bad = np.flatnonzero(~valid.any(axis=0))
+        raise InputError(f"{bad.size} markers are never measured (first: index {bad[0]})")
+    t = np.arange(F)
+    # index of the previous and next valid frame per (frame, marker), vectorised
+    prev = np.where(valid, t[:, None], -1)
+    prev = np.maximum.accumulate(prev, axis=0)
+    nxt = np.where(valid, t[:, None], F)
+    nxt = np.minimum.accumulate(nxt[::-1], axis=0)[::-1]
+    prev_c = np.where(prev < 0, nxt, prev)
+    nxt_c = np.where(nxt >= F, prev_c, nxt)
+    cols = np.arange(M)[None, :]
+    p0, p1 = p[prev_c, cols], p[nxt_c, cols]
+    span = np.maximum(nxt_c - prev_c, 1)
+    w = np.clip((t[:, None] - prev_c) / span, 0, 1)[..., None]
+    return np.where(valid[..., None], p, p0 + w * (p1 - p0))
+
+
+def estimate_head_pose(points, neutral_frame: int = 0, iterations: int = 6) -> np.ndarray:
+    """Per-frame ``R (F, 3, 3), t (F, 3)`` with ``points[f] ≈ R[f] @ points[neutral] + t[f]``,
+    by an iteratively reweighted rigid fit (weights 1 / (1 + (r / c)^2), c = 1.5 x median residual)."""
+    p = np.asarray(points, float)
+    ref = p[neutral_frame]
+    F = len(p)
+    R = np.empty((F, 3, 3))
+    t = np.empty((F, 3))
+    for f in range(F):
+        w = np.ones(len(ref))
+        for _ in range(iterations):
+            Rf, tf = rigid_fit(ref, p[f], w)
+            r = np.linalg.norm(ref @ Rf.T + tf - p[f], axis=1)
+            c = max(1.5 * np.median(r), 1e-6)
+            w = 1.0 / (1.0 + (r / c) ** 2)
+        R[f], t[f] = Rf, tf
+    return R, t
+
+
+@dataclass
+class Binding:
+    labels: list
+    vertices: np.ndarray          # (M,) bound head vertex per marker
+    distance_mm: np.ndarray       # (M,) marker-to-vertex distance in the neutral frame
+    displacements: np.ndarray     # (F, M, 3) head mm, from the neutral frame
+    markers_head: np.ndarray      # (F, M, 3) the markers in the head frame
+    scale: float                  # head mm per take unit
+    landmark_rms_mm: float        # residual of the similarity over the landmark markers
+    landmarks_used: list
+    filled: np.ndarray            # (F, M) frames where a gap was filled
+    head_motion: tuple = None     # (R (F, 3, 3), t (F, 3)): the head's rigid motion from the neutral frame, head mm
+
+
+def _landmark_of(label: str, landmarks: dict):
+    name = label[3:] if label.startswith("lm_") else label
+    return name if name in landmarks else None
+
+
+def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose=None,
+              exclude_groups=("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower")) -> Binding:
+    """Register a take ``points (F, M, 3)`` (NaN = gap) to ``head``; see the module text."""
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, float)
+    if p.ndim != 3 or p.shape[2] != 3 or p.shape[1] == 0 or p.shape[0] == 0:
+        raise InputError("a take needs points of shape (frames, markers, 3)")
+    F, M, _ = p.shape
+    labels = [str(s) for s in labels]
+    if len(labels) != M:
+        raise InputError(f"{len(labels)} labels for {M} markers")
+    if not 0 <= neutral_frame < F:
+        raise InputError(f"the neutral frame {neutral_frame} is outside the take's {F} frames")
+    valid = np.all(np.isfinite(p), axis=2)
+    seen = valid[neutral_frame]
+    if not seen.all():
+        missing = [labels[i] for i in np.flatnonzero(~seen)]
+        raise InputError(f"the take's marker count changes: {len(missing)} of {M} markers are missing in the "
+                         f"neutral frame {neutral_frame} ({', '.join(missing[:5])}{', ...' if len(missing) > 5 else ''}); "
+                         "choose a neutral frame where every marker is seen")
+    head.validate()
+    lms = head.landmarks()
+    pairs = [(i, _landmark_of(s, lms)) for i, s in enumerate(labels)]
+    pairs = [(i, n) for i, n in pairs if n is not None]
+    if len(pairs) < 3:
+        raise InputError(f"the take has {len(pairs)} markers labelled like the head's landmarks "
+                         f"({', '.join(sorted(lms))}); at least 3 are needed to place it on the head")
+    filled = ~valid
+    p = fill_gaps(p)
+    if head_pose is None:
+        R, t = estimate_head_pose(p, neutral_frame)
+    else:
+        hp = np.asarray(head_pose, float)
+        if hp.shape != (F, 3, 4):
+            raise InputError(f"head pose must have shape ({F}, 3, 4)")
+        # camera = R_f q + t_f for head-frame q: relative to the neutral frame
+        Rn, tn = hp[neutral_frame, :, :3], hp[neutral_frame, :, 3]
+        R = hp[:, :, :3] @ Rn.T
+        t = hp[:, :, 3] - np.einsum("fij,j->fi", R, tn)
+    # undo the head motion: q = R^T (p - t), in the neutral frame's pose
+    q = np.einsum("fji,fmj->fmi", R, p - t[:, None, :])
+    idx = np.array([i for i, _ in pairs])
+    target = head.vertices[[lms[n] for _, n in pairs]]
+    pts = q[neutral_frame, idx]
+    if np.linalg.matrix_rank(pts - pts.mean(0), tol=1e-6 * max(1.0, np.abs(pts).max())) < 2:
+        raise InputError("the take's landmark markers are collinear: the head's placement is undetermined")
+    s, Rs, ts = similarity_fit(pts, target)
+    aligned = s * q @ Rs.T + ts
+    rms = float(np.sqrt(np.mean(np.sum((aligned[neutral_frame, idx] - target) ** 2, axis=1))))
+    # bind each marker to its nearest allowed vertex, one marker per vertex
+    allowed = np.ones(len(head.vertices), bool)
+    for g in exclude_groups:
+        allowed[head.members(g, 0.01)] = False
+    cand = np.flatnonzero(allowed)
+    k = min(8, cand.size)
+    dist, nn = cKDTree(head.vertices[cand]).query(aligned[neutral_frame], k=k)
+    dist, nn = dist.reshape(M, k), nn.reshape(M, k)
+    cols, inv = np.unique(nn, return_inverse=True)
+    cost = np.full((M, cols.size), 1e9)
+    cost[np.repeat(np.arange(M), k), inv.ravel()] = dist.ravel()
+    rows, chosen = linear_sum_assignment(cost)
+    if np.any(cost[rows, chosen] >= 1e9):
+        raise InputError("markers are too crowded to bind one per vertex")
+    vert = np.empty(M, np.int64)
+    vert[rows] = cand[cols[chosen]]
+    d = np.linalg.norm(aligned[neutral_frame] - head.vertices[vert], axis=1)
+    # the head's motion in the head frame: x -> Rh x + th moves the neutral head onto frame f
+    Rh = np.einsum("ij,fjk,lk->fil", Rs, R, Rs)
+    th = ts - Rh @ ts + s * t @ Rs.T
+    return Binding(labels=labels, vertices=vert, distance_mm=d, displacements=aligned - aligned[neutral_frame],
+                   markers_head=aligned, scale=s, landmark_rms_mm=rms, landmarks_used=[n for _, n in pairs],
+                   filled=filled, head_motion=(Rh, th))
