@@ -64,22 +64,35 @@ def fill_gaps(points) -> np.ndarray:
     return np.where(valid[..., None], p, p0 + w * (p1 - p0))
 
 
-def estimate_head_pose(points, neutral_frame: int = 0, iterations: int = 6) -> np.ndarray:
-    """Per-frame ``R (F, 3, 3), t (F, 3)`` with ``points[f] ≈ R[f] @ points[neutral] + t[f]``,
-    by an iteratively reweighted rigid fit (weights 1 / (1 + (r / c)^2), c = 1.5 x median residual)."""
+def _irls_rigid(ref, cur, iterations):
+    w = np.ones(len(ref))
+    for _ in range(iterations):
+        R, t = rigid_fit(ref, cur, w)
+        r = np.linalg.norm(ref @ R.T + t - cur, axis=1)
+        c = max(1.5 * np.median(r), 1e-9)
+        w = 1.0 / (1.0 + (r / c) ** 2)
+    return R, t, r
+
+
+def estimate_head_pose(points, neutral_frame: int = 0, iterations: int = 6, rigid_fraction: float = 0.25):
+    """Per-frame ``R (F, 3, 3), t (F, 3)`` with ``points[f] ≈ R[f] @ points[neutral] + t[f]``.
+
+    Two passes in the spirit of weight-compensated motion estimation (Rurainsky & Eisert,
+    section 3.3): an iteratively reweighted rigid fit of all markers (weights
+    1 / (1 + (r / c)^2), c = 1.5 x the median residual) finds how much each marker
+    deforms over the take; the ``rigid_fraction`` that deform least then carry the
+    final per-frame fit."""
     p = np.asarray(points, float)
     ref = p[neutral_frame]
-    F = len(p)
+    F, M = p.shape[:2]
+    resid = np.empty((F, M))
+    for f in range(F):
+        resid[f] = _irls_rigid(ref, p[f], iterations)[2]
+    rigid = np.argsort(np.sqrt(np.mean(resid ** 2, axis=0)))[: max(4, int(rigid_fraction * M))]
     R = np.empty((F, 3, 3))
     t = np.empty((F, 3))
     for f in range(F):
-        w = np.ones(len(ref))
-        for _ in range(iterations):
-            Rf, tf = rigid_fit(ref, p[f], w)
-            r = np.linalg.norm(ref @ Rf.T + tf - p[f], axis=1)
-            c = max(1.5 * np.median(r), 1e-6)
-            w = 1.0 / (1.0 + (r / c) ** 2)
-        R[f], t[f] = Rf, tf
+        R[f], t[f], _ = _irls_rigid(ref[rigid], p[f, rigid], iterations)
     return R, t
 
 

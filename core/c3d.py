@@ -219,7 +219,8 @@ def read_c3d(path) -> dict:
     labels = labels[:n_points]
     if len(labels) < n_points:
         labels += [f"marker{i:03d}" for i in range(len(labels), n_points)]
-    units = _strings(params[("POINT", "UNITS")])[0] if ("POINT", "UNITS") in params else "mm"
+    units = (_strings(params[("POINT", "UNITS")]) if ("POINT", "UNITS") in params else []) or ["mm"]
+    units = units[0] or "mm"
     analog_used = number("ANALOG", "USED", "h") if ("ANALOG", "USED") in params else 0
     if analog_used:
         raise InputError(f"{path}: C3D files with analog channels are not supported")

@@ -46,13 +46,16 @@ REST = "rest"
 @dataclass
 class RigSettings:
     k: float = PAPER_K             # eq. 7.1's kernel constant, mm
-    blend_rings: int = 3           # mesh rings over which neighbouring regions blend
+    blend_rings: int = 1           # mesh rings over which neighbouring regions blend
     blinks: bool = True
     blink_interval_s: float = 2.5  # mean time between blinks (Lin 2003, section 7.4)
     blink_duration_s: float = 0.25
     blink_seed: int = 0
     jaw_stretch_limits: tuple = (0.9, 1.1)
     hypothetical_jaw_points: int = 8
+    # region pairs that never blend (the mouth slit), except within `corner_blend_mm` of the mouth corners
+    hard_borders: tuple = (("upper_lip", "lower_lip"),)
+    corner_blend_mm: float = 6.0
 
 
 def blink_closure(n_frames: int, fps: float, interval_s: float = 2.5, duration_s: float = 0.25,
@@ -160,6 +163,18 @@ class FaceRig:
         V = self.head.vertices
         e = self.head.edges()
         n = len(V)
+        names = list(REGIONS) + [REST]
+        lms = self.head.landmarks()
+        corners = [V[lms[c]] for c in ("mouth_corner_l", "mouth_corner_r") if c in lms]
+        for a, b in self.s.hard_borders:
+            ia, ib = names.index(a), names.index(b)
+            la, lb = labels[e[:, 0]], labels[e[:, 1]]
+            across = ((la == ia) & (lb == ib)) | ((la == ib) & (lb == ia))
+            if corners:
+                mid = 0.5 * (V[e[:, 0]] + V[e[:, 1]])
+                near = np.min([np.linalg.norm(mid - c, axis=1) for c in corners], axis=0) < self.s.corner_blend_mm
+                across &= ~near
+            e = e[~across]
         A = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
         A = (A + sp.identity(n)).tocsr()
         A = sp.diags(1.0 / np.asarray(A.sum(1)).ravel()) @ A
@@ -243,11 +258,12 @@ class FaceRig:
             c, r = head.eye(side)
             lids = np.flatnonzero(w > 0)
             upper = lids[np.argmax(w[lids])]
-            # the lower lid margin: skin just outside the eyeball, below the centre, nearest the upper margin
+            # the lower lid margin: skin on or just outside the eyeball's front, below its centre
             skin = np.setdiff1d(np.arange(len(V)), np.r_[head.members(f"eyeball_{side}"), lids])
-            d = np.linalg.norm(V[skin] - c, axis=1)
-            below = (V[skin] - c) @ head.face_axes()["down"] > 0
-            ring = skin[(d < r + 1.5) & below]
+            rel = V[skin] - c
+            d = np.linalg.norm(rel, axis=1)
+            ax_ = head.face_axes()
+            ring = skin[(d > r - 0.25) & (d < r + 3.0) & (rel @ ax_["down"] > 0) & (rel @ ax_["forward"] > 0.6 * r)]
             if ring.size == 0:
                 continue
             ru = V[upper] - c
@@ -265,7 +281,7 @@ class FaceRig:
 
     # -- per frame ---------------------------------------------------------------------
     def jaw_motion(self, chin_disp):
-        """Eq.-free jaw rule: the opening angle about the hinge axis (positive = chin below
+        """The jaw rule of section 7.4: the opening angle about the hinge axis (positive = chin below
         neutral) and the stretch, per frame, from the chin displacement ``(F, 3)``."""
         a = self.hinge_axis
         r0 = self.chin_radial0

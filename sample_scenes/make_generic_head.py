@@ -221,7 +221,7 @@ def build(assets) -> tuple[HeadModel, dict, dict]:
         m = np.linalg.norm(units[unit], axis=1)
         m[~np.isin(np.arange(n), skin)] = 0
         c, r = eye_c[side]
-        up = y < c[1] + 1.0
+        up = (y < c[1] + 1.0) & ((x > 0) if side == "l" else (x < 0))
         w = np.where(up, m / m.max(), 0.0)
         groups[f"eyelid_upper_{side}"] = np.where(w > 0.02, w, 0.0)
     groups["teeth_upper"] = onehot(part_of["helper-upper-teeth"])
