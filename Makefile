@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cat requirements.txt requirements-dev.txt pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench sample clean venv
+.PHONY: demo test bench sample head contact-sheet clean venv
 
 venv: $(STAMP)
 
@@ -32,3 +32,9 @@ sample: $(STAMP)
 
 clean:
 	rm -rf $(VENV) out build dist *.egg-info .pytest_cache
+
+head: $(STAMP)
+	$(PY) sample_scenes/make_generic_head.py
+
+contact-sheet: $(STAMP)
+	$(PY) sample_scenes/make_contact_sheet.py

@@ -1,6 +1,7 @@
 """``make bench``: speed of the mirror core and the section 6.2 simulations.
 
     python -m benchmarks.run --out bench_results [--trials 100] [--workers 2] [--skip-simulation]
+        [--skip-extraction] [--skip-tracking] [--skip-animation]
 
 Writes (atomically) into the output folder:
 
@@ -9,7 +10,9 @@ Writes (atomically) into the output folder:
 * ``fig6_1_points.png`` ... ``fig6_4_orientation.png`` -- the four figures;
 * ``expected_error.csv`` -- Monte-Carlo check of eq. 3.26;
 * ``extraction.json`` -- marker extraction accuracy under faults, speed, memory;
-* ``summary.md`` -- the tables quoted in the README.
+* ``tracking.json`` -- tracking accuracy and speed from detections;
+* ``animation.json`` -- bake of 1,000 frames, head fit, rig accuracy, PCA error vs modes;
+* ``summary.md`` -- the tables quoted in the README (a skipped part reuses its last JSON).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from pathlib import Path
 
 from core.atomic import write_files_atomically
 
+from .animation import animation_summary, run_animation_benchmark
 from .extraction import run_extraction_benchmark
 from .tracking import run_tracking_benchmark
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
@@ -192,6 +196,7 @@ def main(argv=None) -> int:
     parser.add_argument("--skip-extraction", action="store_true", help="no marker-extraction benchmark")
     parser.add_argument("--stream-frames", type=int, default=10000, help="frames of the memory/stream test")
     parser.add_argument("--skip-tracking", action="store_true", help="no tracking benchmark")
+    parser.add_argument("--skip-animation", action="store_true", help="no head/fit/rig/bake benchmark")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -233,12 +238,23 @@ def main(argv=None) -> int:
         with ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn")) as pool:
             ext = pool.submit(run_extraction_benchmark, args.stream_frames).result()
         files[out / "extraction.json"] = json.dumps(ext, indent=2) + "\n"
-    trk = None
-    if not args.skip_tracking:
-        print("tracking from detections ...", flush=True)
-        trk = run_tracking_benchmark()
-        files[out / "tracking.json"] = json.dumps(trk, indent=2) + "\n"
+    elif (out / "extraction.json").is_file():
+        ext = json.loads((out / "extraction.json").read_text())  # the summary keeps the last measured figures
+    def measure_or_reuse(skip, name, label, run):
+        """Run one part and stage its JSON; when skipped, the summary reuses the last measured file."""
+        if not skip:
+            print(label, flush=True)
+            result = run()
+            files[out / name] = json.dumps(result, indent=2) + "\n"
+            return result
+        return json.loads((out / name).read_text()) if (out / name).is_file() else None
+
+    trk = measure_or_reuse(args.skip_tracking, "tracking.json", "tracking from detections ...", run_tracking_benchmark)
+    anim = measure_or_reuse(args.skip_animation, "animation.json", "head fit, rig and bake ...",
+                            run_animation_benchmark)
     summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
+    if anim is not None:
+        summary = summary.rstrip("\n") + "\n" + "\n".join(animation_summary(anim)) + "\n"
     files[out / "summary.md"] = summary
     write_files_atomically(files)
     print(summary)

@@ -23,7 +23,7 @@ displacement) and hypothetical jaw points near the ears. Per frame:
    a sphere about the eye, by its ``eyelid_upper`` weight times the angle that shuts
    the lid margin onto the lower lid.
 5. **Teeth.** Upper teeth follow the skull (no displacement in the head frame),
-   lower teeth and tongue the jaw's rigid motion.
+   lower teeth the jaw's rigid motion.
 
 Shapes: markers ``(F, M, 3)``, vertices ``(F, V, 3)``, all millimetres in the head frame.
 Everything per frame is array code; the per-region systems are factored once.

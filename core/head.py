@@ -18,7 +18,7 @@ camera), polygons, and named per-vertex weights (Blender's vertex groups):
 ``eyelid_upper_l``, ``eyelid_upper_r``
     how far each upper-lid vertex travels in a full blink (1 at the lid margin).
 ``teeth_upper``, ``teeth_lower``
-    upper teeth follow the skull, lower teeth (and tongue) the jaw.
+    upper teeth follow the skull, lower teeth the jaw.
 ``inner_lip_lower``
     the inner lower lip, replaced by the Hermite surface of figure 7.9.
 

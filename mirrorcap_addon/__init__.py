@@ -7,16 +7,17 @@ Registration runs in documented stages (after Rigify):
 3. panels.
 
 Each stage lists its classes; :func:`register` registers them in that order and
-:func:`unregister` removes them in reverse. The stages are empty until the UI
-issues land; the numbers all come from ``..core``.
+:func:`unregister` removes them in reverse. Operators so far: ``mirrorcap.bake``
+(:mod:`.operators`); panels arrive with the UI issue. The numbers all come from ``..core``.
 """
 
 import bpy
 
 from ..core import __version__
+from . import operators
 
 PROPERTY_CLASSES: tuple = ()
-OPERATOR_CLASSES: tuple = ()
+OPERATOR_CLASSES: tuple = operators.CLASSES
 PANEL_CLASSES: tuple = ()
 
 STAGES = (("properties", PROPERTY_CLASSES), ("operators", OPERATOR_CLASSES), ("panels", PANEL_CLASSES))

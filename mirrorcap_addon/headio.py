@@ -34,6 +34,7 @@ def new_head_object(head: HeadModel, shape_keys: dict | None = None, name: str |
     mesh.polygons.add(npoly)
     starts = np.r_[0, np.cumsum(head.polygon_sizes)[:-1]].astype(np.int32)
     mesh.polygons.foreach_set("loop_start", starts)
+    mesh.polygons.foreach_set("use_smooth", np.ones(npoly, bool))
     mesh.update()
     if mesh.validate(verbose=False):
         raise InputError(f"the head {name!r} has invalid geometry")

