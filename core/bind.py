@@ -23,7 +23,6 @@ import numpy as np
 
 from .errors import InputError
 from .head import HeadModel
-from .motion import rigid_fit
 
 
 def similarity_fit(A, B):
@@ -65,11 +64,23 @@ def fill_gaps(points) -> np.ndarray:
 
 
 def _irls_rigid(ref, cur, iterations):
-    w = np.ones(len(ref))
+    """Iteratively reweighted Arun fits of ``ref (M, 3)`` onto every frame of ``cur (F, M, 3)``
+    at once (batched SVD): ``R (F, 3, 3)``, ``t (F, 3)`` and the residuals ``(F, M)``."""
+    F = cur.shape[0]
+    w = np.ones(cur.shape[:2])
     for _ in range(iterations):
-        R, t = rigid_fit(ref, cur, w)
-        r = np.linalg.norm(ref @ R.T + t - cur, axis=1)
-        c = max(1.5 * np.median(r), 1e-9)
+        wn = w / w.sum(1, keepdims=True)
+        ca = wn @ ref                                             # (F, 3)
+        cb = np.einsum("fm,fmi->fi", wn, cur)
+        H = np.einsum("fm,fmi,fmj->fij", wn, ref[None] - ca[:, None], cur - cb[:, None])
+        U, _, Vt = np.linalg.svd(H)
+        V_ = np.swapaxes(Vt, 1, 2)
+        D = np.tile(np.eye(3), (F, 1, 1))
+        D[:, 2, 2] = np.sign(np.linalg.det(V_ @ np.swapaxes(U, 1, 2)))
+        R = V_ @ D @ np.swapaxes(U, 1, 2)
+        t = cb - np.einsum("fij,fj->fi", R, ca)
+        r = np.linalg.norm(np.einsum("fij,mj->fmi", R, ref) + t[:, None] - cur, axis=2)
+        c = np.maximum(1.5 * np.median(r, axis=1, keepdims=True), 1e-9)
         w = 1.0 / (1.0 + (r / c) ** 2)
     return R, t, r
 
@@ -81,18 +92,13 @@ def estimate_head_pose(points, neutral_frame: int = 0, iterations: int = 6, rigi
     section 3.3): an iteratively reweighted rigid fit of all markers (weights
     1 / (1 + (r / c)^2), c = 1.5 x the median residual) finds how much each marker
     deforms over the take; the ``rigid_fraction`` that deform least then carry the
-    final per-frame fit."""
+    final per-frame fit. Every frame is fitted at once."""
     p = np.asarray(points, float)
     ref = p[neutral_frame]
-    F, M = p.shape[:2]
-    resid = np.empty((F, M))
-    for f in range(F):
-        resid[f] = _irls_rigid(ref, p[f], iterations)[2]
+    M = p.shape[1]
+    resid = _irls_rigid(ref, p, iterations)[2]
     rigid = np.argsort(np.sqrt(np.mean(resid ** 2, axis=0)))[: max(4, int(rigid_fraction * M))]
-    R = np.empty((F, 3, 3))
-    t = np.empty((F, 3))
-    for f in range(F):
-        R[f], t[f], _ = _irls_rigid(ref[rigid], p[f, rigid], iterations)
+    R, t, _ = _irls_rigid(ref[rigid], p[:, rigid], iterations)
     return R, t
 
 

@@ -325,8 +325,7 @@ class FaceRig:
         J = self._jaw_displacement(V[moving], theta, stretch)
         D[:, moving] += self.jaw_weight[moving][None, :, None] * J
         D[:, self.teeth_lower] = self._jaw_displacement(V[self.teeth_lower], theta, stretch)
-        for name in ("teeth_upper",):
-            D[:, self.head.members(name)] = 0.0
+        D[:, self.head.members("teeth_upper")] = 0.0
         if self.inner.size:
             p0, q0, p1, b1 = self.lip_idx
             X = V[None] + D

@@ -55,6 +55,33 @@ def fit_sphere(points) -> tuple[np.ndarray, float]:
     return c, float(np.sqrt(max(s[3] + c @ c, 0.0)))
 
 
+def vertex_normals(points, triangles) -> np.ndarray:
+    """Unit area-weighted vertex normals of a triangle mesh ``(N, 3)``, ``(T, 3)``."""
+    v = np.asarray(points, float)
+    t = np.asarray(triangles, np.int64)
+    fn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, t[:, k], fn)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+
+
+def farthest_points(points, n: int, seed: int = 0, initial_distance=None) -> np.ndarray:
+    """Indices of ``n`` farthest-point samples of ``points`` (a random first one); with
+    ``initial_distance`` (N,), points already near earlier picks (e.g. landmarks) count as covered."""
+    P = np.asarray(points, float)
+    rng = np.random.default_rng(seed)
+    chosen = [int(rng.integers(len(P)))]
+    d = np.linalg.norm(P - P[chosen[0]], axis=1)
+    if initial_distance is not None:
+        d = np.minimum(initial_distance, d)
+    for _ in range(min(n, len(P)) - 1):
+        j = int(np.argmax(d))
+        chosen.append(j)
+        d = np.minimum(d, np.linalg.norm(P - P[j], axis=1))
+    return np.asarray(chosen, np.int64)
+
+
 @dataclass
 class HeadModel:
     vertices: np.ndarray                    # (V, 3) mm, neutral
@@ -135,13 +162,7 @@ class HeadModel:
         return np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
 
     def vertex_normals(self, vertices=None) -> np.ndarray:
-        v = self.vertices if vertices is None else vertices
-        t = self.triangles()
-        fn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-        n = np.zeros_like(v)
-        for k in range(3):
-            np.add.at(n, t[:, k], fn)
-        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        return vertex_normals(self.vertices if vertices is None else vertices, self.triangles())
 
     def eye(self, side: str) -> tuple[np.ndarray, float]:
         """Centre and radius of the eyeball sphere on ``side`` ('l' or 'r')."""

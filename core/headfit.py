@@ -22,7 +22,7 @@ import numpy as np
 
 from .bind import similarity_fit
 from .errors import InputError
-from .head import HeadModel
+from .head import HeadModel, farthest_points, vertex_normals
 from .rbf import RBFScattering
 
 
@@ -36,28 +36,6 @@ class FitResult:
     residual_max_mm: float
     covered: int               # vertices within reach of the scan
     rounds: list               # per round: RMS residual of the controls before the move
-
-
-def _vertex_normals(points, faces):
-    n = np.zeros_like(points)
-    if faces is None or len(faces) == 0:
-        return None
-    f = np.asarray(faces, np.int64)
-    fn = np.cross(points[f[:, 1]] - points[f[:, 0]], points[f[:, 2]] - points[f[:, 0]])
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-
-
-def _farthest_points(P, n, seed=0):
-    rng = np.random.default_rng(seed)
-    chosen = [int(rng.integers(len(P)))]
-    d = np.linalg.norm(P - P[chosen[0]], axis=1)
-    for _ in range(min(n, len(P)) - 1):
-        j = int(np.argmax(d))
-        chosen.append(j)
-        d = np.minimum(d, np.linalg.norm(P - P[j], axis=1))
-    return np.asarray(chosen)
 
 
 def fit_head(head: HeadModel, scan_vertices, scan_faces=None, scan_landmarks: dict | None = None, rounds: int = 4,
@@ -85,7 +63,7 @@ def fit_head(head: HeadModel, scan_vertices, scan_faces=None, scan_landmarks: di
     rbf = RBFScattering(V[lm_idx], k=k * s)
     V = V + rbf(V, dst - V[lm_idx])
     tree = cKDTree(S)
-    normals = _vertex_normals(S, scan_faces)
+    normals = None if scan_faces is None or len(scan_faces) == 0 else vertex_normals(S, scan_faces)
 
     def closest(points):
         d, j = tree.query(points)
@@ -105,7 +83,7 @@ def fit_head(head: HeadModel, scan_vertices, scan_faces=None, scan_landmarks: di
         near = np.setdiff1d(near, lm_idx)
         if near.size < 4:
             break
-        ctrl = near[_farthest_points(V[near], n_controls)]
+        ctrl = near[farthest_points(V[near], n_controls)]
         move = target[ctrl] - V[ctrl]
         history.append(float(np.sqrt(np.mean(np.sum(move ** 2, axis=1)))))
         cidx = np.r_[ctrl, lm_idx]

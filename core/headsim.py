@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import InputError
-from .head import REGIONS, HeadModel
+from .head import REGIONS, HeadModel, farthest_points
 from .motion import rotation_zyx
 
 EXPRESSIONS = {
@@ -87,15 +87,9 @@ def place_markers(head: HeadModel, n_markers: int, seed: int = 0) -> tuple[np.nd
     need = n_markers - len(verts)
     if need > cand.size:
         raise InputError(f"the head has room for {cand.size + len(verts)} markers, not {n_markers}")
-    rng = np.random.default_rng(seed)
     P = head.vertices[cand]
-    chosen = [int(rng.integers(cand.size))]
-    d = np.min(np.linalg.norm(P[:, None] - head.vertices[verts][None], axis=2), axis=1)
-    d = np.minimum(d, np.linalg.norm(P - P[chosen[0]], axis=1))
-    for _ in range(need - 1):
-        j = int(np.argmax(d))
-        chosen.append(j)
-        d = np.minimum(d, np.linalg.norm(P - P[j], axis=1))
+    to_landmarks = np.min(np.linalg.norm(P[:, None] - head.vertices[verts][None], axis=2), axis=1)
+    chosen = farthest_points(P, need, seed, initial_distance=to_landmarks)
     verts += [int(c) for c in cand[chosen]]
     labels += [f"m{i:03d}" for i in range(need)]
     return np.asarray(verts, np.int64), labels

@@ -27,6 +27,18 @@ class PCAShapes:
     energy: np.ndarray     # (K,) fraction of the squared deformation each mode explains
 
 
+def _eigen_deformations(A, k: int):
+    """Unit eigen-deformations ``(k, 3V)`` of ``A A^T`` from ``A^T A`` (rows of ``A`` = frames),
+    and all eigenvalues, largest first; modes with a zero eigenvalue stay zero."""
+    lam, W = np.linalg.eigh(A @ A.T)
+    order = np.argsort(lam)[::-1]
+    lam, W = np.maximum(lam[order], 0.0), W[:, order]
+    E = np.zeros((k, A.shape[1]))
+    keep = lam[:k] > lam[0] * 1e-18 if lam[0] > 0 else np.zeros(k, bool)
+    E[keep] = (W[:, :k][:, keep].T @ A) / np.sqrt(lam[:k][keep])[:, None]
+    return E, lam
+
+
 def pca_shapes(displacements, n_modes: int) -> PCAShapes:
     D = np.asarray(displacements, float)
     if D.ndim != 3 or D.shape[2] != 3:
@@ -35,14 +47,8 @@ def pca_shapes(displacements, n_modes: int) -> PCAShapes:
     if not 1 <= n_modes <= min(F, 3 * V):
         raise InputError(f"--modes must be between 1 and {min(F, 3 * V)} for this take")
     A = D.reshape(F, 3 * V)                       # rows = frames (A^T of the text)
-    gram = A @ A.T                                # (F, F)
-    lam, W = np.linalg.eigh(gram)
-    order = np.argsort(lam)[::-1]
-    lam, W = np.maximum(lam[order], 0.0), W[:, order]
     k = n_modes
-    keep = lam[:k] > lam[0] * 1e-18 if lam[0] > 0 else np.zeros(k, bool)
-    E = np.zeros((k, 3 * V))
-    E[keep] = (W[:, :k][:, keep].T @ A) / np.sqrt(lam[:k][keep])[:, None]   # unit eigen-deformations
+    E, lam = _eigen_deformations(A, k)
     coeff = A @ E.T                               # (F, K)
     peak = np.abs(coeff).max(0)
     peak[peak == 0] = 1.0
@@ -61,15 +67,11 @@ def pca_error_table(displacements, ks=(1, 2, 3, 8, 23, 65)) -> list:
     D = np.asarray(displacements, float)
     F, V, _ = D.shape
     A = D.reshape(F, 3 * V)
-    lam, W = np.linalg.eigh(A @ A.T)
-    order = np.argsort(lam)[::-1]
-    lam, W = np.maximum(lam[order], 0.0), W[:, order]
+    ks = [k for k in ks if k <= F]
+    E_all, _ = _eigen_deformations(A, max(ks, default=0))   # one decomposition for every K
     rows = []
     for k in ks:
-        if k > F:
-            continue
-        good = lam[:k] > lam[0] * 1e-18
-        E = (W[:, :k][:, good].T @ A) / np.sqrt(lam[:k][good])[:, None]
+        E = E_all[:k]
         err = np.linalg.norm((A - (A @ E.T) @ E).reshape(F, V, 3), axis=2)
         rows.append({"modes": int(k), "max_mm": float(err.max()), "mean_mm": float(err.mean()),
                      "rms_mm": float(np.sqrt(np.mean(err ** 2)))})
