@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cat requirements.txt requirements-dev.txt pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench sample head contact-sheet clean venv
+.PHONY: demo test bench sample head rig-clip extension contact-sheet clean venv
 
 venv: $(STAMP)
 
@@ -30,8 +30,16 @@ bench: $(STAMP)
 sample: $(STAMP)
 	$(PY) sample_scenes/make_mirror_demo.py
 
+# Re-render the sample rig clip with Cycles (about 12 minutes on 2 cores; frames are cached).
+rig-clip: $(STAMP)
+	$(PY) sample_scenes/make_rig_clip.py
+
+# The Blender extension: fetch the pinned wheels, validate, one zip per platform into dist/.
+extension: $(STAMP)
+	$(PY) tools/extension.py build --out dist
+
 clean:
-	rm -rf $(VENV) out build dist *.egg-info .pytest_cache
+	rm -rf $(VENV) out build dist wheels *.egg-info .pytest_cache
 
 head: $(STAMP)
 	$(PY) sample_scenes/make_generic_head.py

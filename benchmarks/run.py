@@ -1,7 +1,7 @@
 """``make bench``: speed of the mirror core and the section 6.2 simulations.
 
     python -m benchmarks.run --out bench_results [--trials 100] [--workers 2] [--skip-simulation]
-        [--skip-extraction] [--skip-tracking] [--skip-animation]
+        [--skip-extraction] [--skip-tracking] [--skip-animation] [--skip-batch]
 
 Writes (atomically) into the output folder:
 
@@ -12,6 +12,7 @@ Writes (atomically) into the output folder:
 * ``extraction.json`` -- marker extraction accuracy under faults, speed, memory;
 * ``tracking.json`` -- tracking accuracy and speed from detections;
 * ``animation.json`` -- bake of 1,000 frames, head fit, rig accuracy, PCA error vs modes;
+* ``batch.json`` -- `mirrorcap batch` of 4 sample takes with 1 and 2 workers;
 * ``summary.md`` -- the tables quoted in the README (a skipped part reuses its last JSON).
 """
 
@@ -31,6 +32,7 @@ from pathlib import Path
 from core.atomic import write_files_atomically
 
 from .animation import animation_summary, run_animation_benchmark
+from .batch import batch_summary, run_batch_benchmark
 from .extraction import run_extraction_benchmark
 from .tracking import run_tracking_benchmark
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
@@ -197,6 +199,7 @@ def main(argv=None) -> int:
     parser.add_argument("--stream-frames", type=int, default=10000, help="frames of the memory/stream test")
     parser.add_argument("--skip-tracking", action="store_true", help="no tracking benchmark")
     parser.add_argument("--skip-animation", action="store_true", help="no head/fit/rig/bake benchmark")
+    parser.add_argument("--skip-batch", action="store_true", help="no `mirrorcap batch` benchmark")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -252,9 +255,13 @@ def main(argv=None) -> int:
     trk = measure_or_reuse(args.skip_tracking, "tracking.json", "tracking from detections ...", run_tracking_benchmark)
     anim = measure_or_reuse(args.skip_animation, "animation.json", "head fit, rig and bake ...",
                             run_animation_benchmark)
+    batch = measure_or_reuse(args.skip_batch, "batch.json", "batch bake of 4 takes, 1 and 2 workers ...",
+                             run_batch_benchmark)
     summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
     if anim is not None:
         summary = summary.rstrip("\n") + "\n" + "\n".join(animation_summary(anim)) + "\n"
+    if batch is not None:
+        summary = summary.rstrip("\n") + "\n\n" + "\n".join(batch_summary(batch)) + "\n"
     files[out / "summary.md"] = summary
     write_files_atomically(files)
     print(summary)

@@ -5,9 +5,12 @@
    or, without one, by a robust rigid fit of every frame to the neutral frame
    (iteratively reweighted Arun fit, the weight-compensated idea of Rurainsky &
    Eisert, section 3.3: markers that deform get down-weighted).
-2. Markers whose labels name a landmark of the head (``nose_tip`` or ``lm_nose_tip``
-   for the group ``lm_nose_tip``) anchor one similarity transform (Umeyama) from
-   the take's neutral frame to the head.
+2. One similarity transform from the take's neutral frame to the head. Where at least
+   three markers' labels name a landmark of the head (``nose_tip`` or ``lm_nose_tip``
+   for the group ``lm_nose_tip``), they anchor it (Umeyama). Otherwise -- the labels
+   ``m000``.. of a fully automatic take -- the markers register to the head's skin
+   surface by similarity ICP (:func:`register_to_surface`), started from a frontal
+   face (the head model is authored facing the camera, as the subject in the rig).
 3. Every other marker binds to its nearest head vertex on the skin (not eyeballs,
    teeth or the inner lip), one marker per vertex (linear assignment).
 
@@ -17,7 +20,7 @@ head millimetres.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -36,6 +39,89 @@ def similarity_fit(A, B):
     var = (a ** 2).sum() / len(A)
     s = float(np.trace(np.diag(S) @ D) / var)
     return s, R, cb - s * R @ ca
+
+
+SURFACE_RMS_LIMIT_MM = 2.5   # unlabelled markers further than this from the skin: not this head
+
+
+def _skin_surface(head: HeadModel, exclude_groups, forward_min: float = -0.2):
+    """Dense samples of the head's front skin: the triangles of allowed, roughly
+    forward-facing vertices, subdivided once; points ``(N, 3)`` and normals ``(N, 3)``."""
+    from .head import vertex_normals
+    from .headfit import subdivide
+
+    ok = np.ones(len(head.vertices), bool)
+    for g in exclude_groups:
+        ok[head.members(g, 0.01)] = False
+    n = head.vertex_normals()
+    ok &= n @ head.face_axes()["forward"] > forward_min
+    T = head.triangles()
+    T = T[np.all(ok[T], axis=1)]
+    if len(T) < 10:
+        raise InputError("the head has too little front skin to register a take to")
+    V, T = subdivide(head.vertices, T, 1)
+    used = np.unique(T)
+    return V[used], vertex_normals(V, T)[used]
+
+
+def register_to_surface(head: HeadModel, points, exclude_groups=(), iterations: int = 60, trim: float = 0.1):
+    """Similarity ``s, R, t`` (head = s R p + t) placing unlabelled markers ``points (M, 3)``
+    on the head's skin: ICP minimising each marker's distance to the tangent plane of its
+    nearest skin point (a linearised scale-rotation-shift step per iteration), the worst
+    ``trim`` of the matches left out, started from the frontal pose turned by 0 and +-15 degrees in
+    yaw and pitch; the start with the smallest residual wins. A start whose scale leaves
+    0.4-2.5 times the first guess (the markers' spread against the skin's) has collapsed
+    onto a patch and counts as no fit (``rms_mm`` infinite). Returns ``s, R, t, rms_mm``."""
+    from scipy.spatial import cKDTree
+
+    from .motion import rotation_zyx
+
+    def rotation_about(axis, angle):
+        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+    P = np.asarray(points, float)
+    if len(P) < 6:
+        raise InputError(f"{len(P)} markers are too few to register to the head's surface (6 or more)")
+    S, N = _skin_surface(head, exclude_groups)
+    tree = cKDTree(S)
+    sc = np.sqrt(np.mean(np.sum((S - S.mean(0)) ** 2, 1)))
+    pc = np.sqrt(np.mean(np.sum((P - P.mean(0)) ** 2, 1)))
+    s0 = 0.8 * sc / max(pc, 1e-12)          # markers cover a little less of the face than the skin samples
+    keep = max(6, int(round((1.0 - trim) * len(P))))
+    best = None
+    for yaw in (0.0, -15.0, 15.0):
+        for pitch in (0.0, -15.0, 15.0):
+            R = rotation_zyx(np.radians([[pitch, yaw, 0.0]]))[0]
+            s = s0
+            t = S.mean(0) + np.array([0.0, 0.0, -0.3 * sc]) - s * R @ P.mean(0)
+            for _ in range(iterations):
+                X = s * P @ R.T + t
+                _, j = tree.query(X)
+                r = np.einsum("ij,ij->i", X - S[j], N[j])
+                sel = np.argsort(np.abs(r))[:keep]
+                # linearised point-to-plane step about the centroid: scale sigma, rotation omega, shift tau
+                c = X[sel].mean(0)
+                Xc, n = X[sel] - c, N[j[sel]]
+                A = np.c_[np.einsum("ij,ij->i", n, Xc), np.cross(Xc, n), n]
+                x = np.linalg.solve(A.T @ A + 1e-9 * np.eye(7), -A.T @ r[sel])
+                sigma, omega, tau = x[0], x[1:4], x[4:]
+                angle = np.linalg.norm(omega)
+                dR = rotation_about(omega / angle, angle) if angle > 0 else np.eye(3)
+                ds = 1.0 + sigma
+                # X' = c + ds dR (X - c) + tau
+                s, R, t = ds * s, dR @ R, ds * dR @ (t - c) + c + tau
+                if abs(sigma) < 1e-7 and angle < 1e-7 and np.linalg.norm(tau) < 1e-5 * sc:
+                    break
+            X = s * P @ R.T + t
+            _, j = tree.query(X)
+            dist = np.abs(np.einsum("ij,ij->i", X - S[j], N[j]))
+            rms = float(np.sqrt(np.mean(np.sort(dist)[:keep] ** 2)))
+            if not 0.4 * s0 < s < 2.5 * s0:
+                rms = float("inf")            # collapsed or blown up: these markers do not cover a face
+            if best is None or rms < best[3]:
+                best = (float(s), R, t, rms)
+    return best
 
 
 def fill_gaps(points) -> np.ndarray:
@@ -110,10 +196,12 @@ class Binding:
     displacements: np.ndarray     # (F, M, 3) head mm, from the neutral frame
     markers_head: np.ndarray      # (F, M, 3) the markers in the head frame
     scale: float                  # head mm per take unit
-    landmark_rms_mm: float        # residual of the similarity over the landmark markers
+    landmark_rms_mm: float        # residual of the similarity: over the landmark markers, or to the skin (ICP)
     landmarks_used: list
+    registration: str             # "landmarks" or "surface"
     filled: np.ndarray            # (F, M) frames where a gap was filled
     head_motion: tuple = None     # (R (F, 3, 3), t (F, 3)): the head's rigid motion from the neutral frame, head mm
+    dropped: list = field(default_factory=list)  # labels left out: not seen in the neutral frame
 
 
 def _landmark_of(label: str, landmarks: dict):
@@ -122,8 +210,13 @@ def _landmark_of(label: str, landmarks: dict):
 
 
 def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose=None,
-              exclude_groups=("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower")) -> Binding:
-    """Register a take ``points (F, M, 3)`` (NaN = gap) to ``head``; see the module text."""
+              exclude_groups=("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower"),
+              unseen: str = "error") -> Binding:
+    """Register a take ``points (F, M, 3)`` (NaN = gap) to ``head``; see the module text.
+    Markers not seen in the neutral frame are an error, or with ``unseen="drop"`` are left
+    out (``Binding.dropped``; a tracker's markers first seen later in the take)."""
+    if unseen not in ("error", "drop"):
+        raise ValueError("unseen must be 'error' or 'drop'")
     from scipy.optimize import linear_sum_assignment
     from scipy.spatial import cKDTree
 
@@ -138,18 +231,23 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         raise InputError(f"the neutral frame {neutral_frame} is outside the take's {F} frames")
     valid = np.all(np.isfinite(p), axis=2)
     seen = valid[neutral_frame]
+    dropped = [labels[i] for i in np.flatnonzero(~seen)]
+    if dropped and unseen == "drop":
+        if seen.sum() < 3:
+            raise InputError(f"only {int(seen.sum())} markers are seen in the neutral frame {neutral_frame}")
+        p, labels, valid = p[:, seen], [s for s, k in zip(labels, seen) if k], valid[:, seen]
+        F, M, _ = p.shape
+        seen = valid[neutral_frame]
     if not seen.all():
         missing = [labels[i] for i in np.flatnonzero(~seen)]
         raise InputError(f"the take's marker count changes: {len(missing)} of {M} markers are missing in the "
                          f"neutral frame {neutral_frame} ({', '.join(missing[:5])}{', ...' if len(missing) > 5 else ''}); "
-                         "choose a neutral frame where every marker is seen")
+                         "choose a neutral frame where every marker is seen, or leave such markers out "
+                         "(--drop-unseen)")
     head.validate()
     lms = head.landmarks()
     pairs = [(i, _landmark_of(s, lms)) for i, s in enumerate(labels)]
     pairs = [(i, n) for i, n in pairs if n is not None]
-    if len(pairs) < 3:
-        raise InputError(f"the take has {len(pairs)} markers labelled like the head's landmarks "
-                         f"({', '.join(sorted(lms))}); at least 3 are needed to place it on the head")
     filled = ~valid
     p = fill_gaps(p)
     if head_pose is None:
@@ -164,14 +262,24 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         t = hp[:, :, 3] - np.einsum("fij,j->fi", R, tn)
     # undo the head motion: q = R^T (p - t), in the neutral frame's pose
     q = np.einsum("fji,fmj->fmi", R, p - t[:, None, :])
-    idx = np.array([i for i, _ in pairs])
-    target = head.vertices[[lms[n] for _, n in pairs]]
-    pts = q[neutral_frame, idx]
-    if np.linalg.matrix_rank(pts - pts.mean(0), tol=1e-6 * max(1.0, np.abs(pts).max())) < 2:
-        raise InputError("the take's landmark markers are collinear: the head's placement is undetermined")
-    s, Rs, ts = similarity_fit(pts, target)
-    aligned = s * q @ Rs.T + ts
-    rms = float(np.sqrt(np.mean(np.sum((aligned[neutral_frame, idx] - target) ** 2, axis=1))))
+    if len(pairs) >= 3:
+        idx = np.array([i for i, _ in pairs])
+        target = head.vertices[[lms[n] for _, n in pairs]]
+        pts = q[neutral_frame, idx]
+        if np.linalg.matrix_rank(pts - pts.mean(0), tol=1e-6 * max(1.0, np.abs(pts).max())) < 2:
+            raise InputError("the take's landmark markers are collinear: the head's placement is undetermined")
+        s, Rs, ts = similarity_fit(pts, target)
+        aligned = s * q @ Rs.T + ts
+        rms = float(np.sqrt(np.mean(np.sum((aligned[neutral_frame, idx] - target) ** 2, axis=1))))
+        registration = "landmarks"
+    else:
+        s, Rs, ts, rms = register_to_surface(head, q[neutral_frame], exclude_groups)
+        if not rms <= SURFACE_RMS_LIMIT_MM:
+            raise InputError(f"the take's markers do not lie on the head's skin (surface registration leaves "
+                             f"{rms:.1f} mm RMS, limit {SURFACE_RMS_LIMIT_MM} mm): fit the head to the subject first, or label at least 3 landmark "
+                             f"markers ({', '.join('lm_' + n for n in sorted(lms)[:3])}, ...)")
+        aligned = s * q @ Rs.T + ts
+        registration = "surface"
     # bind each marker to its nearest allowed vertex, one marker per vertex
     allowed = np.ones(len(head.vertices), bool)
     for g in exclude_groups:
@@ -193,5 +301,6 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     Rh = np.einsum("ij,fjk,lk->fil", Rs, R, Rs)
     th = ts - Rh @ ts + s * t @ Rs.T
     return Binding(labels=labels, vertices=vert, distance_mm=d, displacements=aligned - aligned[neutral_frame],
-                   markers_head=aligned, scale=s, landmark_rms_mm=rms, landmarks_used=[n for _, n in pairs],
-                   filled=filled, head_motion=(Rh, th))
+                   markers_head=aligned, scale=s, landmark_rms_mm=rms,
+                   landmarks_used=[n for _, n in pairs] if registration == "landmarks" else [],
+                   registration=registration, filled=filled, head_motion=(Rh, th), dropped=dropped if unseen == "drop" else [])

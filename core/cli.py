@@ -143,10 +143,12 @@ def _cmd_track(args) -> int:
             known = (a, b, float(mm))
         except ValueError:
             raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
+    if not args.face_distance > 0:
+        raise MirrorCapError("--face-distance must be a positive number of millimetres")
     source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
                        colors=colors, layout=layout, mirrors=mirrors, known_length=known, start=start, end=end,
-                       step=args.step)
+                       step=args.step, face_distance_mm=args.face_distance)
     if not args.quiet:
         pf = report["per_frame"]
         n = report["frames"]["count"]
@@ -277,6 +279,9 @@ def build_parser(extra_commands=None) -> argparse.ArgumentParser:
     trk.add_argument("--mirrors", help="MIRRORS.json (from `mirrorcap mirrors`); default: self-calibration")
     trk.add_argument("--known-length", nargs=3, metavar=("LABEL_A", "LABEL_B", "MM"),
                      help="distance between two tracked markers (labels m000..) in mm; sets the units to mm")
+    trk.add_argument("--face-distance", type=float, default=600.0, metavar="MM",
+                     help="without --mirrors: the face's distance from the camera that sets the take's scale "
+                          "(default 600; --known-length makes the scale exact)")
     trk.add_argument("--colors", help="COLORS.json colour classes")
     trk.add_argument("--rig", help="RIG.json view rectangles")
     trk.set_defaults(func=_cmd_track)
@@ -302,8 +307,11 @@ def build_parser(extra_commands=None) -> argparse.ArgumentParser:
     learn.add_argument("--threshold", type=float, default=60.0)
     learn.set_defaults(func=_cmd_colors_learn)
 
-    demo = sub.add_parser("demo", help="run the main job on the embedded sample and print its accuracy")
-    demo.add_argument("--out", default="out", help="folder for the demo's outputs (default out/)")
+    demo = sub.add_parser("demo-mirrors", help="mirror planes and 3D points of the embedded two-mirror sample",
+                          description="Reconstruct sample_scenes/mirror_demo (pairs -> mirror planes -> 3D points "
+                                      "in mm) and compare with its ground truth. (`mirrorcap demo` runs the whole "
+                                      "capture-to-animation job; it needs bpy.)")
+    demo.add_argument("--out", default="out", help="folder for the outputs (default out/)")
     demo.add_argument("-q", "--quiet", action="store_true")
     demo.set_defaults(func=_cmd_demo)
     if extra_commands is not None:

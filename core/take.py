@@ -5,6 +5,10 @@ MIRRORS.json, else self-calibrated from the first frames' markers, ``core.selfca
 tracking (``core.track``), an optional known-length scale, and the outputs, written
 together atomically.
 
+Without MIRRORS.json the take's units are "relative": self-calibration has no scale, so the
+face is put ``face_distance_mm`` (600) from the camera, which makes the units close to mm;
+``--known-length`` makes them exact.
+
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (count,
 labels, the rigid markers that carried the head pose); ``head_pose`` (per frame
@@ -31,6 +35,7 @@ from .track import TrackSettings, track
 from .video import VideoSource
 
 SELFCAL_FRAMES = 10
+FACE_DISTANCE_MM = 600.0   # nominal camera-to-face distance that fixes a self-calibrated take's scale
 
 
 @dataclass
@@ -58,10 +63,11 @@ def collect_detections(stream) -> tuple[list, list]:
 def run_track(source: VideoSource, camera: Camera, output, *, report=None, colors: ColorClasses | None = None,
               extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
               known_length=None, start: int = 0, end: int | None = None, step: int = 1,
-              settings: TrackSettings | None = None, progress=None) -> dict:
-    """Track ``source`` and write the take (C3D) and its report (JSON)."""
+              settings: TrackSettings | None = None, progress=None, track_progress=None,
+              face_distance_mm: float = FACE_DISTANCE_MM) -> dict:
+    """Track ``source`` and write the take (C3D) and its report (JSON). ``progress(frames_read)``
+    is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame."""
     from .detect import DetectionStream, _check_camera
-    from .selfcal import link_self_calibrated, self_calibrate_mirror
 
     _check_camera(camera, source)
     t0 = time.perf_counter()
@@ -69,6 +75,36 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                              start, end, step, progress)
     numbers, frames = collect_detections(stream)
     t_detect = time.perf_counter() - t0
+    return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
+                            known_length=known_length, step=step, settings=settings, progress=track_progress,
+                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm)
+
+
+def _median_depth(frames, camera: Camera, cals, ds) -> float:
+    """Median depth of the 3D candidates of ``frames`` under self-calibrated planes."""
+    from .candidates import frame_candidates
+
+    normals = [c.plane.normal for c in cals]
+    z = []
+    for fr in frames:
+        cand = frame_candidates(camera.normalize(fr.direct), fr.direct_color, [camera.normalize(m) for m in fr.mirror],
+                                fr.mirror_color, normals, ds, camera.focal_px)
+        z.append(cand.points[:, 2])
+    z = np.concatenate(z) if z else np.zeros(0)
+    z = z[np.isfinite(z) & (z > 0)]
+    if z.size == 0:
+        raise DegenerateError("no marker pairs between the direct view and the mirrors: cannot place the face")
+    return float(np.median(z))
+
+
+def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
+                     known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
+                     timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM) -> dict:
+    """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
+    e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
+    Without MIRRORS.json the scale is set by putting the face ``face_distance_mm`` away."""
+    from .selfcal import link_self_calibrated, self_calibrate_mirror
+
     if len(frames) < 2:
         raise InputError("tracking needs at least 2 frames")
     if mirrors is None:
@@ -77,12 +113,16 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                                   "visible? (give MIRRORS.json from `mirrorcap mirrors` otherwise)")
         cals = [self_calibrate_mirror(frames[:SELFCAL_FRAMES], camera, k) for k in range(2)]
         ds = link_self_calibrated(frames[:SELFCAL_FRAMES], camera, cals)
+        # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
+        # levels are in mm, so put the face at its nominal distance: the take is then
+        # "relative" units that are close to millimetres (a known length makes them exact).
+        ds = ds * (face_distance_mm / _median_depth(frames[:SELFCAL_FRAMES], camera, cals, ds))
         planes = [MirrorPlane(normal=c.plane.normal, d=float(d)) for c, d in zip(cals, ds)]
         mirror_source, units = "self-calibration", "relative"
     else:
         planes, mirror_source, units = list(mirrors), "file", "mm"
     t1 = time.perf_counter()
-    result = track(frames, camera, planes, settings)
+    result = track(frames, camera, planes, settings, progress=progress)
     t_track = time.perf_counter() - t1
     points = result.points
     head = result.head_pose.copy()
@@ -101,7 +141,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
         head[:, 3:] *= scale
         planes = [MirrorPlane(normal=p.normal, d=p.d * scale) for p in planes]
         units = "mm"
-    rate = source.fps / step
+    rate = fps
     report_data = {
         "units": units,
         "mirrors": [{"mirror": k, "normal": [float(v) for v in p.normal], "d": float(p.d), "source": mirror_source}
@@ -111,7 +151,8 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                     "rigid": [result.labels[i] for i in result.rigid]},
         "head_pose": head.tolist(),
         "per_frame": {k: v.tolist() for k, v in result.stats.items()},
-        "timings_s": {"detect": t_detect, "track": t_track, "tracking_frames_per_s": len(frames) / max(t_track, 1e-9)},
+        "timings_s": {**(timings or {}), "track": t_track,
+                      "tracking_frames_per_s": len(frames) / max(t_track, 1e-9)},
     }
     files = {output: c3d_bytes(result.labels, points, rate, units=units if units == "mm" else "rel",
                                camera_mask=result.camera_mask, conjectured=result.conjectured)}

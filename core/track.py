@@ -60,6 +60,7 @@ class TrackSettings:
     depth_margin_mm: float = 200.0  # candidates deeper/shallower than the neutral face +- this are dropped
     rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
     min_measured_frames: int = 5  # a marker measured in fewer frames is not reported
+    min_measured_fraction: float = 0.25  # ... nor one this rarely measured that is lost for good (see _keep_measured)
 
 
 @dataclass
@@ -207,16 +208,25 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = _track_pass(frames, camera, normals, ds, s, markers, given, progress)
     result.rigid = given
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
-    return _keep_measured(result, s.min_measured_frames)
+    return _keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
 
 
-def _keep_measured(result: TrackResult, min_frames: int) -> TrackResult:
-    """A marker must earn its place: one measured in fewer than ``min_frames`` frames
-    is dropped (a pairing that never matched real candidates), and nothing is
-    reported for a marker before its first measurement."""
+def _keep_measured(result: TrackResult, min_frames: int, min_fraction: float = 0.0) -> TrackResult:
+    """A marker must earn its place. Dropped: one measured in fewer than ``min_frames``
+    frames; and one measured in fewer than ``min_fraction`` of its frames (from its first
+    measurement on) that is also never measured again in the last three quarters of them -- a wrong
+    direct/mirror pairing whose 3D point stops matching real candidates, and would be
+    conjectured, wrongly, for the rest of the take. (A marker that is merely often hidden
+    keeps coming back, and stays.) Nothing is reported for a marker before its first
+    measurement."""
     measured = result.assigned_blob >= 0
-    keep = np.flatnonzero(measured.sum(axis=0) >= min_frames)
+    F = measured.shape[0]
     first = np.argmax(measured, axis=0)
+    last = F - 1 - np.argmax(measured[::-1], axis=0)
+    span = F - first
+    count = measured.sum(axis=0)
+    lost = (count < min_fraction * span) & (F - 1 - last > 0.75 * span)
+    keep = np.flatnonzero((count >= min_frames) & ~lost)
     before = np.arange(measured.shape[0])[:, None] < first[None, :]
     result.points[before] = np.nan
     result.head_frame[before] = np.nan

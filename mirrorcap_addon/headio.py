@@ -132,3 +132,21 @@ def write_head_blend(head: HeadModel, path, shape_keys: dict | None = None) -> N
     bpy.ops.wm.read_factory_settings(use_empty=True)
     new_head_object(head, shape_keys)
     save_blend_atomically(path)
+
+
+def replace_head_vertices(obj, old_core, new_core) -> None:
+    """Move ``obj``'s rest shape from ``old_core`` to ``new_core`` (core mm); every shape key
+    moves with it, keeping its offsets from the basis."""
+    delta = (core_to_blender(new_core) - core_to_blender(old_core)).astype(np.float32).ravel()
+    mesh = obj.data
+    n = len(mesh.vertices) * 3
+    if delta.size != n:
+        raise InputError(f"the fitted head has {delta.size // 3} vertices, {obj.name!r} has {n // 3}")
+    co = np.empty(n, np.float32)
+    if mesh.shape_keys is not None:
+        for kb in mesh.shape_keys.key_blocks:
+            kb.data.foreach_get("co", co)
+            kb.data.foreach_set("co", co + delta)
+    mesh.vertices.foreach_get("co", co)
+    mesh.vertices.foreach_set("co", co + delta)
+    mesh.update()

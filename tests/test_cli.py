@@ -232,7 +232,7 @@ def test_usage_errors(capsys):
 
 
 def test_demo_command(tmp_path, capsys):
-    code, stdout, err = _run(["demo", "--out", tmp_path], capsys)
+    code, stdout, err = _run(["demo-mirrors", "--out", tmp_path], capsys)
     assert code == 0, err
     report = json.loads((tmp_path / "demo_points.json").read_text())
     acc = report["accuracy_against_truth"]

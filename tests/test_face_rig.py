@@ -292,12 +292,42 @@ def test_bind_with_a_scaled_turned_take_and_gaps(head_and_keys):
     assert np.abs(b.displacements - disp[:, verts])[ok].max() < 0.05
 
 
+def test_bind_without_landmark_labels_registers_to_the_skin(head_and_keys):
+    """A fully automatic take (labels m000..) in arbitrary units and pose binds by surface ICP."""
+    head, keys = head_and_keys
+    labels, pts, verts, disp, _ = synthetic_take(head, keys, n_markers=150, n_frames=20, seed=4)
+    anon = [f"m{i:03d}" for i in range(len(labels))]
+    # relative units (as a self-calibrated take), the subject looking 12 degrees down and 8 aside
+    a, c = np.radians(12.0), np.radians(8.0)
+    R = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(a), -np.sin(a)], [0.0, np.sin(a), np.cos(a)]]) @ np.array(
+        [[np.cos(c), 0.0, np.sin(c)], [0.0, 1.0, 0.0], [-np.sin(c), 0.0, np.cos(c)]])
+    centre = pts[0].mean(0)
+    pts_rel = 0.37 * ((pts - centre) @ R.T + centre)
+    b = bind_take(head, anon, pts_rel)
+    assert b.registration == "surface" and b.landmarks_used == []
+    assert b.scale == pytest.approx(1 / 0.37, rel=1e-4)
+    assert b.landmark_rms_mm < 0.05
+    assert np.array_equal(b.vertices, verts)
+    # the same binding as from landmark labels (the residual then is head-pose estimation's)
+    by_landmarks = bind_take(head, labels, pts_rel)
+    assert by_landmarks.registration == "landmarks"
+    assert np.abs(b.displacements - by_landmarks.displacements).max() < 1e-3
+    assert np.abs(b.displacements - disp[:, verts]).max() < 0.2
+
+
 def test_bind_bad_takes(head_and_keys):
     head, keys = head_and_keys
     labels, pts, *_ = synthetic_take(head, keys, n_markers=60, n_frames=10, seed=5)
     anon = [f"x{i}" for i in range(len(labels))]
-    with pytest.raises(InputError, match="at least 3 are needed"):
-        bind_take(head, anon, pts)
+    with pytest.raises(InputError, match="too few to register"):
+        bind_take(head, anon[:5], pts[:, :5])
+    # a take that is not this face (a flat sheet of markers) is refused, not bound anyhow
+    sheet = np.zeros_like(pts)
+    g = np.stack(np.meshgrid(np.arange(10), np.arange(6)), -1).reshape(-1, 2) * 15.0
+    sheet[:, :, :2] = g[: pts.shape[1]]
+    sheet[:, :, 2] = 600.0
+    with pytest.raises(InputError, match="do not lie on the head's skin"):
+        bind_take(head, anon, sheet)
     holey = pts.copy()
     holey[0, 20] = np.nan
     with pytest.raises(InputError, match="marker count changes"):

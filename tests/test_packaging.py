@@ -68,8 +68,10 @@ def test_versions_agree():
     assert manifest["version"] == project["project"]["version"] == core.__version__
     assert manifest["blender_version_min"] == "4.2.0"
     excluded = manifest["build"]["paths_exclude_pattern"]
-    for folder in ("/tests/", "/sample_scenes/", "/benchmarks/"):
+    for folder in ("/tests/", "/sample_scenes/*", "/benchmarks/", "/tools/"):
         assert folder in excluded
+    # of the samples only the generic head ships (Add Generic Head); test_addon checks the zip
+    assert "!/sample_scenes/generic_head/" in excluded
 
 
 def test_addon_registers_in_bpy():

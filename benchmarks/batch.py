@@ -1,0 +1,59 @@
+"""``mirrorcap batch`` speed: 4 copies of the sample take baked with 1 and with 2 workers.
+
+The take and the head come from the demo's first steps on the sample clip (track, fit), run
+here with no preview render; each batch run bakes the 4 copies (frames mode) into its own
+folder. The figure is the wall-clock ratio, 1 worker over 2 (the issue asks for >= 1.7x).
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+
+def run_batch_benchmark(copies: int = 4, repeats: int = 2) -> dict:
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory(prefix="mirrorcap-batch-") as tmp:
+        tmp = Path(tmp)
+        demo = tmp / "demo"
+        res = subprocess.run([sys.executable, "-c", "from mirrorcap.mirrorcap_addon.demo import run_demo; "
+                              f"run_demo({str(demo)!r}, quiet=True, preview=False)"],
+                             capture_output=True, text=True, cwd=root)
+        if res.returncode != 0:
+            raise RuntimeError(res.stderr[-2000:])
+        takes = []
+        for i in range(copies):
+            takes.append(tmp / f"take_{i}.c3d")
+            shutil.copy(demo / "take.c3d", takes[-1])
+        walls = {}
+        for workers in (1, 2):
+            times = []
+            for r in range(repeats):
+                out = tmp / f"out_{workers}_{r}"
+                t0 = time.perf_counter()
+                res = subprocess.run([sys.executable, "-m", "mirrorcap", "batch", *map(str, takes), "--head",
+                                      str(demo / "fitted_head.blend"), "--out", str(out), "--workers", str(workers),
+                                      "--drop-unseen", "-q"], capture_output=True, text=True, cwd=root)
+                times.append(time.perf_counter() - t0)
+                if res.returncode != 0:
+                    raise RuntimeError(res.stdout[-1000:] + res.stderr[-2000:])
+            walls[workers] = times
+        frames = int(__import__("json").loads((demo / "demo.json").read_text())["clip"]["frames"])
+    best1, best2 = min(walls[1]), min(walls[2])
+    return {"takes": copies, "frames_per_take": frames, "seconds_1_worker": walls[1], "seconds_2_workers": walls[2],
+            "speedup_best": best1 / best2,
+            "speedup_median": sorted(walls[1])[len(walls[1]) // 2] / sorted(walls[2])[len(walls[2]) // 2]}
+
+
+def batch_summary(b) -> list:
+    return ["## `mirrorcap batch` (4 copies of the sample take, frames mode, whole command incl. Blender start)", "",
+            "| workers | wall seconds (each run) |", "| --- | --- |",
+            f"| 1 | {', '.join(f'{s:.1f}' for s in b['seconds_1_worker'])} |",
+            f"| 2 | {', '.join(f'{s:.1f}' for s in b['seconds_2_workers'])} |", "",
+            f"- speed-up with 2 workers: **{b['speedup_best']:.2f}x** (fastest runs), {b['speedup_median']:.2f}x "
+            f"(median runs)", ""]

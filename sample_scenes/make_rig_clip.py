@@ -1,0 +1,378 @@
+"""Render the embedded sample rig clip with Blender (Cycles on the CPU) -- `make rig-clip`.
+
+What it makes, in ``sample_scenes/rig_clip/``:
+
+- ``clip.mp4``      1280x720, 30 fps: a subject's head with 150 fluorescent-style markers
+                    under black light, two plane mirrors beside the cheeks, the camera in front.
+                    The subject performs a few seconds of expressions (the generic head's
+                    faceunit shape keys, mixed by :mod:`core.headsim`) with a small head motion.
+- ``camera.json``   the camera's intrinsics (no lens distortion: Blender's camera is ideal).
+- ``truth.npz``     ground truth: ``labels (M,)``, ``points (F, M, 3)`` marker centres in the
+                    camera frame in mm, ``pose (F, 3, 4)`` (camera = R q + t for subject-frame q),
+                    ``mirror_normals (2, 3)`` and ``mirror_d (2,)`` (n.x = d, mm; mirror 0 is the
+                    one imaged on the left), ``marker_vertices (M,)``, ``fps``; the subject's
+                    neutral ``subject_vertices (V, 3)`` (the generic head's topology),
+                    ``performance_seed`` (the performance is
+                    ``core.headsim.performance(generic head, its shape keys, F, fps, seed)``) and
+                    ``scan_rotation``, ``scan_translation`` (scan = R subject + t).
+- ``scan.ply``      a scan-like mesh of the subject's neutral face: the front of the head only,
+                    subdivided, with 0.15 mm of noise, in its own scanner frame (mm).
+- ``rig.json``      the view rectangles (split at the mirror panels' inner edges).
+- ``scan_landmarks.json``  the scan's landmarks ``{name: [x, y, z]}``, as a user would click them.
+
+The subject is the generic head with a smooth change of proportions (wider, a longer nose, a
+lower chin), so fitting the generic head to the scan has work to do. Frames are rendered to
+PNG in ``sample_scenes/.cache/rig_clip_frames`` (an interrupted run resumes) and encoded to
+H.264 by Blender's FFmpeg; the outputs are replaced only once everything is written.
+
+    python sample_scenes/make_rig_clip.py [--frames 120] [--samples 16] [--preview FRAME]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT))
+
+from core.atomic import write_files_atomically  # noqa: E402
+from core.camera import Camera  # noqa: E402
+from core.head import HeadModel  # noqa: E402
+from core.headfit import subdivide  # noqa: E402
+from core.headio import load_head_npz  # noqa: E402
+from core.headsim import head_motion, performance, place_markers  # noqa: E402
+from core.mirror import reflect_points  # noqa: E402
+from core.simulate import mirror_plane_from_angles  # noqa: E402
+
+OUT = HERE / "rig_clip"
+CACHE = HERE / ".cache" / "rig_clip_frames"
+IMAGE_SIZE = (1280, 720)
+FOCAL_PX = 1400.0
+FPS = 30
+HEAD_DISTANCE_MM = 650.0          # head-frame origin (between the ears) from the camera
+MIRROR_LONGITUDE_DEG = 65.0       # mirrors tangent to a sphere around the face (fig. 6.4)
+MIRROR_RADIUS_MM = 120.0
+MIRROR_CENTRE = (0.0, 20.0, 560.0)
+MARKER_RADIUS_MM = 1.25           # 2.5 mm dots
+MARKER_LIFT_MM = 0.5              # how far a dot's centre sits above the skin
+N_MARKERS = 150
+# sRGB colours of the four blacklight paints (core.markers' default classes)
+PAINTS = {"pink": (255, 110, 200), "blue-green": (70, 230, 200), "dark-blue": (60, 80, 255),
+          "purple": (175, 70, 255)}
+
+
+def subject_from_generic(head: HeadModel) -> np.ndarray:
+    """The subject's neutral vertices: the generic head wider by 5 %, 2 % shorter, with the
+    nose 4 mm longer and the chin 3 mm lower (smooth Gaussian bumps)."""
+    V = head.vertices * np.array([1.05, 0.98, 1.0])
+    lm = head.landmarks()
+    for name, move, sigma in (("nose_tip", (0.0, 0.0, -4.0), 14.0), ("chin", (0.0, 3.0, -1.0), 18.0)):
+        c = V[lm[name]]
+        w = np.exp(-np.sum((V - c) ** 2, axis=1) / (2 * sigma**2))
+        V = V + w[:, None] * np.asarray(move)
+    return V
+
+
+def rig_planes():
+    """Mirror 0 (imaged left) then mirror 1, as ``(normal, d)``."""
+    return [mirror_plane_from_angles(s * MIRROR_LONGITUDE_DEG, 0.0, MIRROR_CENTRE, MIRROR_RADIUS_MM) for s in (-1, 1)]
+
+
+def make_scan(head: HeadModel, subject: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Front-of-face triangles of the subject, subdivided twice, noised and moved into a scanner
+    frame; returns vertices, triangles and the landmark positions in that frame."""
+    T = head.triangles()
+    skip = np.zeros(len(subject), bool)
+    for g in ("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower"):
+        skip[head.members(g, 0.01)] = True
+    front = subject[:, 2] < -20.0                    # the face side of the ears
+    keep = np.all(front[T] & ~skip[T], axis=1)
+    V, T = subdivide(subject, T[keep], levels=2)
+    used = np.unique(T)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(used.size)
+    V, T = V[used], remap[T]
+    V = V + rng.normal(0.0, 0.15, V.shape)
+    ang = np.radians([8.0, -5.0, 3.0])               # the scanner's own frame
+    cx, cy, cz = np.cos(ang)
+    sx, sy, sz = np.sin(ang)
+    R = (np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]) @ np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+         @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]]))
+    t = np.array([12.0, -40.0, 310.0])
+    lms = {n: (R @ subject[i] + t).round(3).tolist() for n, i in head.landmarks().items() if not n.startswith("tragus")}
+    return V @ R.T + t, T, lms, R, t
+
+
+def ply_bytes(V, T) -> bytes:
+    header = (f"ply\nformat binary_little_endian 1.0\ncomment MirrorCap sample scan, millimetres\n"
+              f"element vertex {len(V)}\nproperty float x\nproperty float y\nproperty float z\n"
+              f"element face {len(T)}\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    faces = np.zeros(len(T), dtype=[("n", "u1"), ("v", "<i4", (3,))])
+    faces["n"], faces["v"] = 3, T
+    return header + np.asarray(V, "<f4").tobytes() + faces.tobytes()
+
+
+def build_scene(bpy, head: HeadModel, subject, marker_colors):
+    from mirrorcap.mirrorcap_addon.frames import core_to_blender
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.render.resolution_x, scene.render.resolution_y = IMAGE_SIZE
+    scene.render.resolution_percentage = 100
+    scene.render.fps = FPS
+    scene.view_settings.view_transform = "Standard"
+    scene.cycles.use_adaptive_sampling = False
+    scene.cycles.use_denoising = False
+    scene.cycles.max_bounces = 2
+    scene.cycles.diffuse_bounces = 0
+    scene.cycles.glossy_bounces = 1
+    scene.cycles.transmission_bounces = 0
+    scene.cycles.volume_bounces = 0
+    scene.cycles.transparent_max_bounces = 0
+    scene.cycles.caustics_reflective = False
+    scene.cycles.caustics_refractive = False
+    scene.render.threads_mode = "AUTO"
+    world = bpy.data.worlds.new("black")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    scene.world = world
+
+    # camera at the origin looking along core +z (Blender +y), core -y (up) = Blender +z
+    cam_data = bpy.data.cameras.new("rig_camera")
+    cam_data.sensor_fit = "HORIZONTAL"
+    cam_data.sensor_width = 36.0
+    cam_data.lens = FOCAL_PX / IMAGE_SIZE[0] * 36.0
+    cam_data.clip_start = 0.01
+    cam = bpy.data.objects.new("rig_camera", cam_data)
+    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+
+    def material(name, color=None, emission=None, glossy=False):
+        mat = bpy.data.materials.new(name)
+        mat.use_nodes = True
+        nt = mat.node_tree
+        nt.nodes.clear()
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        if emission is not None:
+            node = nt.nodes.new("ShaderNodeEmission")
+            node.inputs["Color"].default_value = (*emission, 1.0)
+            node.inputs["Strength"].default_value = 1.0
+            nt.links.new(node.outputs[0], out.inputs["Surface"])
+        elif glossy:
+            node = nt.nodes.new("ShaderNodeBsdfGlossy")
+            node.inputs["Color"].default_value = (0.92, 0.92, 0.92, 1.0)
+            node.inputs["Roughness"].default_value = 0.0
+            nt.links.new(node.outputs[0], out.inputs["Surface"])
+        else:
+            node = nt.nodes.new("ShaderNodeBsdfDiffuse")
+            node.inputs["Color"].default_value = (*color, 1.0)
+            nt.links.new(node.outputs[0], out.inputs["Surface"])
+        return mat
+
+    # the subject's head (positions are set per frame); MakeHuman's helper teeth poke through
+    # the chin when the jaw opens, so they are not rendered
+    T = head.triangles()
+    teeth = np.zeros(len(subject), bool)
+    for g in ("teeth_upper", "teeth_lower"):
+        teeth[head.members(g, 0.01)] = True
+    T = T[~np.any(teeth[T], axis=1)]
+    mesh = bpy.data.meshes.new("subject")
+    mesh.vertices.add(len(subject))
+    mesh.loops.add(T.size)
+    mesh.polygons.add(len(T))
+    mesh.loops.foreach_set("vertex_index", T.ravel().astype(np.int32))
+    mesh.polygons.foreach_set("loop_start", np.arange(0, T.size, 3, dtype=np.int32))
+    mesh.polygons.foreach_set("use_smooth", np.ones(len(T), bool))
+    mesh.update()
+    skin = bpy.data.objects.new("subject", mesh)
+    skin.data.materials.append(material("skin_under_blacklight", color=(0.10, 0.07, 0.16)))
+    scene.collection.objects.link(skin)
+
+    # markers: one mesh of 150 icospheres, one material per paint
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=MARKER_RADIUS_MM / 1000.0)
+    proto = bpy.context.active_object
+    unit = np.empty(len(proto.data.vertices) * 3, np.float32)
+    proto.data.vertices.foreach_get("co", unit)
+    unit = unit.reshape(-1, 3)
+    tris = np.array([p.vertices[:] for p in proto.data.polygons], np.int64)
+    bpy.data.objects.remove(proto)
+    M = len(marker_colors)
+    dots = bpy.data.meshes.new("markers")
+    dots.vertices.add(M * len(unit))
+    allt = (tris[None] + (np.arange(M) * len(unit))[:, None, None]).reshape(-1, 3)
+    dots.loops.add(allt.size)
+    dots.polygons.add(len(allt))
+    dots.loops.foreach_set("vertex_index", allt.ravel().astype(np.int32))
+    dots.polygons.foreach_set("loop_start", np.arange(0, allt.size, 3, dtype=np.int32))
+    for name, rgb in PAINTS.items():
+        lin = [((c / 255.0 + 0.055) / 1.055) ** 2.4 for c in rgb]
+        dots.materials.append(material(f"paint_{name}", emission=lin))
+    dots.polygons.foreach_set("material_index", np.repeat(np.asarray(marker_colors, np.int32), len(tris)))
+    dots.polygons.foreach_set("use_smooth", np.ones(len(allt), bool))
+    dots.update()
+    markers = bpy.data.objects.new("markers", dots)
+    scene.collection.objects.link(markers)
+
+    # the mirrors: finite panels beside the cheeks
+    edges = []
+    for k, (n, d) in enumerate(rig_planes()):
+        n = np.asarray(n)
+        foot = n * d                                      # closest point of the plane to the origin
+        tangent = np.cross(n, [0.0, 1.0, 0.0])
+        tangent /= np.linalg.norm(tangent)
+        if tangent[2] < 0:
+            tangent = -tangent                            # along the mirror, away from the camera
+        # the panel runs from ~170 mm in front of the tangent point to ~40 mm behind it
+        touch = np.asarray(MIRROR_CENTRE) - n * MIRROR_RADIUS_MM
+        along = (touch - foot) @ tangent
+        s0, s1 = along - 190.0, along + 45.0
+        up = np.array([0.0, 1.0, 0.0])
+        corners = np.array([foot + tangent * s + up * h for s, h in ((s0, -150), (s1, -150), (s1, 170), (s0, 170))])
+        pm = bpy.data.meshes.new(f"mirror{k}")
+        pm.from_pydata(core_to_blender(corners).tolist(), [], [(0, 1, 2, 3)])
+        pm.materials.append(material(f"mirror{k}_glass", glossy=True))
+        edges.append(corners[[1, 2]])                      # the panel's edge beside the face
+        mo = bpy.data.objects.new(f"mirror{k}", pm)
+        scene.collection.objects.link(mo)
+
+    # a dim black-light lamp above the camera: skin faintly visible, far below the marker threshold
+    lamp = bpy.data.lights.new("blacklight", "AREA")
+    lamp.energy = 0.35
+    lamp.size = 0.4
+    lamp.color = (0.55, 0.35, 1.0)
+    lo = bpy.data.objects.new("blacklight", lamp)
+    lo.location = core_to_blender(np.array([0.0, -250.0, 100.0]))
+    lo.rotation_euler = (np.pi / 2 - 0.45, 0.0, 0.0)
+    lo.visible_glossy = False                         # no lamp reflection in the mirrors
+    scene.collection.objects.link(lo)
+    return scene, skin, markers, unit, edges
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=120)
+    ap.add_argument("--samples", type=int, default=8)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--preview", type=int, help="render only this frame to sample_scenes/.cache/preview.png")
+    args = ap.parse_args(argv)
+
+    import bpy
+
+    from mirrorcap.mirrorcap_addon.frames import core_to_blender
+
+    head, keys = load_head_npz(ROOT / "sample_scenes" / "generic_head" / "head.npz", with_shape_keys=True)
+    rng = np.random.default_rng(args.seed)
+    subject = subject_from_generic(head)
+    sub_head = dataclasses.replace(head, vertices=subject, name="subject")
+    verts, labels = place_markers(sub_head, N_MARKERS, seed=args.seed)
+    disp, _ = performance(head, keys, args.frames, FPS, seed=args.seed)
+    R, t = head_motion(args.frames, FPS, max_deg=6.0, seed=args.seed)
+    t = t + np.array([0.0, 0.0, HEAD_DISTANCE_MM])
+    marker_colors = np.arange(len(verts)) % len(PAINTS)
+    rng.shuffle(marker_colors)
+
+    scene, skin, markers, unit, edges = build_scene(bpy, head, subject, marker_colors)
+    scene.cycles.samples = args.samples
+    CACHE.mkdir(parents=True, exist_ok=True)
+    frames = [args.preview] if args.preview is not None else range(args.frames)
+    points = np.empty((args.frames, len(verts), 3))
+    t0 = time.perf_counter()
+    for f in range(args.frames):
+        q = subject + disp[f]
+        normals = sub_head.vertex_normals(q)
+        centre_q = q[verts] + MARKER_LIFT_MM * normals[verts]
+        cam_v = q @ R[f].T + t[f]
+        points[f] = centre_q @ R[f].T + t[f]
+        if f not in frames:
+            continue
+        png = CACHE / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"
+        if png.is_file() and args.preview is None:
+            continue
+        skin.data.vertices.foreach_set("co", core_to_blender(cam_v).astype(np.float32).ravel())
+        skin.data.update()
+        dots = (core_to_blender(points[f])[:, None, :] + unit[None]).reshape(-1, 3)
+        markers.data.vertices.foreach_set("co", dots.astype(np.float32).ravel())
+        markers.data.update()
+        scene.render.filepath = str(png)
+        scene.render.image_settings.file_format = "PNG"
+        bpy.ops.render.render(write_still=True)
+        done = f + 1
+        print(f"frame {done}/{args.frames}  {time.perf_counter() - t0:.0f} s", flush=True)
+    if args.preview is not None:
+        return 0
+
+    # encode the PNGs to H.264 with Blender's FFmpeg through the sequencer
+    tmp_dir = OUT.with_name(OUT.name + ".tmp")
+    shutil.rmtree(tmp_dir, ignore_errors=True)
+    tmp_dir.mkdir(parents=True)
+    enc = bpy.data.scenes.new("encode")
+    enc.render.resolution_x, enc.render.resolution_y = IMAGE_SIZE
+    enc.render.resolution_percentage = 100
+    enc.render.fps = FPS
+    enc.frame_start, enc.frame_end = 1, args.frames
+    enc.view_settings.view_transform = "Standard"
+    seq = enc.sequence_editor_create()
+    strips = seq.strips if hasattr(seq, "strips") else seq.sequences
+    strip = strips.new_image("frames", str(CACHE / "frame_0000.png"), channel=1, frame_start=1)
+    for f in range(1, args.frames):
+        strip.elements.append(f"frame_{f:04d}.png")
+    if hasattr(enc.render.image_settings, "media_type"):      # Blender 5.0: stills and videos split
+        enc.render.image_settings.media_type = "VIDEO"
+    enc.render.image_settings.file_format = "FFMPEG"
+    enc.render.ffmpeg.format = "MPEG4"
+    enc.render.ffmpeg.codec = "H264"
+    enc.render.ffmpeg.constant_rate_factor = "PERC_LOSSLESS"
+    enc.render.ffmpeg.gopsize = FPS
+    enc.render.use_file_extension = False
+    enc.render.filepath = str(tmp_dir / "clip.mp4")
+    with bpy.context.temp_override(scene=enc):
+        bpy.ops.render.render(animation=True, scene=enc.name)
+    camera = Camera.ideal(FOCAL_PX, IMAGE_SIZE)
+    planes = rig_planes()
+    # RIG.json: the views split where the mirror panels' inner edges are imaged
+    b0 = float(np.floor(camera.project(edges[0])[:, 0].max()))
+    b1 = float(np.ceil(camera.project(edges[1])[:, 0].min()))
+    w, h = IMAGE_SIZE
+    rig = {"views": {"mirror0": [0, 0, b0, h], "direct": [b0, 0, b1, h], "mirror1": [b1, 0, w, h]}}
+    scan_V, scan_T, scan_lms, scan_R, scan_t = make_scan(head, subject, rng)
+    buf = __import__("io").BytesIO()
+    np.savez_compressed(buf, labels=np.array(labels), points=points.astype(np.float32),
+                        pose=np.concatenate([R, t[:, :, None]], axis=2), marker_vertices=verts,
+                        marker_colors=marker_colors, mirror_normals=np.array([p[0] for p in planes]),
+                        mirror_d=np.array([p[1] for p in planes]), fps=np.float64(FPS),
+                        subject_vertices=subject.astype(np.float32), performance_seed=np.int64(args.seed),
+                        scan_rotation=scan_R, scan_translation=scan_t)
+    info = {"frames": args.frames, "fps": FPS, "markers": len(verts), "samples_per_pixel": args.samples,
+            "head_distance_mm": HEAD_DISTANCE_MM,
+            "mirror_longitude_deg": MIRROR_LONGITUDE_DEG, "marker_diameter_mm": 2 * MARKER_RADIUS_MM,
+            "paints": PAINTS, "made_by": "sample_scenes/make_rig_clip.py"}
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_files_atomically({
+        OUT / "clip.mp4": (tmp_dir / "clip.mp4").read_bytes(),
+        OUT / "camera.json": json.dumps(camera.to_dict(), indent=2) + "\n",
+        OUT / "truth.npz": buf.getvalue(),
+        OUT / "scan.ply": ply_bytes(scan_V, scan_T),
+        OUT / "scan_landmarks.json": json.dumps(scan_lms, indent=2) + "\n",
+        OUT / "clip.json": json.dumps(info, indent=2) + "\n",
+        OUT / "rig.json": json.dumps(rig, indent=2) + "\n",
+    })
+    shutil.rmtree(tmp_dir, ignore_errors=True)
+    size = (OUT / "clip.mp4").stat().st_size
+    print(f"{OUT / 'clip.mp4'}: {size / 1e6:.2f} MB, {args.frames} frames; truth, scan and camera beside it")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

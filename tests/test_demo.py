@@ -1,0 +1,96 @@
+"""The end-to-end demo on the embedded rendered clip, and `mirrorcap batch`."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+
+from core.scanio import read_landmarks, read_scan
+
+
+def _run(args, timeout=900):
+    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=timeout, cwd=ROOT,
+                          env=dict(os.environ))
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    code = ("from mirrorcap.mirrorcap_addon.demo import run_demo\n"
+            f"run_demo({str(out)!r}, quiet=True, preview=False)\n")
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    return out, json.loads((out / "demo.json").read_text())
+
+
+def test_demo_tracks_fits_binds_and_bakes_the_sample_accurately(demo):
+    out, d = demo
+    trk = d["tracking"]
+    assert trk["markers_tracked"] >= 115 and trk["markers_matched"] == trk["markers_tracked"]
+    assert trk["rms_mm"] < 0.3                       # 0.12 mm measured; a wrong scale or pairing gives mm
+    assert trk["max_mm"] < 3.0
+    assert trk["reported_fraction"] > 0.98
+    assert abs(trk["scale_to_mm"] - 1.0) < 0.1       # the face-distance prior puts the take near mm
+    assert d["fit"]["residual_to_scan_rms_mm"] < 1.5 and d["fit"]["error_to_true_face_rms_mm"] < 1.5
+    assert d["bind"]["registration"] == "surface" and d["bind"]["surface_rms_mm"] < 0.5
+    an = d["animation"]
+    assert an["shape_keys"] == d["clip"]["frames"] == 120
+    assert an["displacement_error_rms_mm"] < an["true_displacement_rms_mm"]
+    page = (out / "report.html").read_text()
+    assert "3D RMS error of the take" in page and f"{trk['rms_mm']:.3f} mm" in page and page.count("<svg") >= 5
+    assert (out / "demo.blend").stat().st_size > 100_000 and (out / "fitted_head.blend").is_file()
+
+
+def test_batch_bakes_takes_in_parallel_and_reports_a_failing_one(demo, tmp_path):
+    out, _ = demo
+    good = [tmp_path / f"take_{i}.c3d" for i in range(2)]
+    for g in good:
+        g.write_bytes((out / "take.c3d").read_bytes())
+    bad = tmp_path / "broken.c3d"
+    bad.write_bytes(b"not a take" * 50)
+    res = _run(["-m", "mirrorcap", "batch", *good, bad, "--head", out / "fitted_head.blend", "--out",
+                tmp_path / "baked", "--workers", "2", "--drop-unseen"])
+    assert res.returncode == 1, res.stdout + res.stderr
+    lines = [ln for ln in res.stdout.splitlines() if "] " in ln and ("ok " in ln or "FAIL" in ln)]
+    assert len(lines) == 3 and sum("FAIL" in ln for ln in lines) == 1
+    assert any("broken.c3d: FAIL" in ln and "not a C3D file" in ln for ln in lines)
+    summary = json.loads((tmp_path / "baked" / "batch.json").read_text())
+    assert summary["failed"] == 1 and summary["takes"] == 3
+    assert [r["ok"] for r in summary["results"]] == [True, True, False]
+    assert len({r["pid"] for r in summary["results"] if r["ok"]}) >= 1
+    for g in good:
+        assert (tmp_path / "baked" / f"{g.stem}.blend").stat().st_size > 100_000
+        assert json.loads((tmp_path / "baked" / f"{g.stem}.bake.json").read_text())["frames"] == 120
+    assert not (tmp_path / "baked" / "broken.blend").exists()
+
+
+def test_scan_readers_agree_across_formats(tmp_path):
+    V, T = read_scan(ROOT / "sample_scenes" / "rig_clip" / "scan.ply")
+    assert V.shape[1] == 3 and T.shape[1] == 3 and T.max() < len(V)
+    sub_v, sub_t = V[:300], T[np.all(T < 300, axis=1)][:200]
+    ascii_ply = tmp_path / "a.ply"
+    ascii_ply.write_text("ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+                         "property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n"
+                         % (len(sub_v), len(sub_t) // 2)
+                         + "".join(f"{x} {y} {z}\n" for x, y, z in sub_v)
+                         # quads: pairs of triangles sharing an edge are written as one polygon here
+                         + "".join(f"4 {a} {b} {c} {a}\n" for a, b, c in sub_t[: len(sub_t) // 2]))
+    va, ta = read_scan(ascii_ply)
+    assert np.allclose(va, sub_v, atol=1e-4) and len(ta) == 2 * (len(sub_t) // 2)
+    obj = tmp_path / "a.obj"
+    obj.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in sub_v)
+                   + "".join(f"f {a + 1}/1 {b + 1}/1 {c + 1}/1\n" for a, b, c in sub_t))
+    vo, to = read_scan(obj)
+    assert np.allclose(vo, sub_v, atol=1e-4) and np.array_equal(to, sub_t)
+    lms = read_landmarks(ROOT / "sample_scenes" / "rig_clip" / "scan_landmarks.json")
+    assert "nose_tip" in lms and lms["nose_tip"].shape == (3,)
+    (tmp_path / "bad.ply").write_bytes(b"PLX garbage")
+    with pytest.raises(Exception, match="not a PLY"):
+        read_scan(tmp_path / "bad.ply")
