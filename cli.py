@@ -82,10 +82,14 @@ def _bake_one(job):
                 "traceback": traceback.format_exc(), "seconds": time.perf_counter() - t0}
 
 
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
 def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = None, quiet: bool = False) -> dict:
     """Bake ``takes`` onto ``head`` with ``workers`` processes; returns the batch summary."""
     import json
     import multiprocessing
+    import os
     import time
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from pathlib import Path
@@ -110,8 +114,21 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
     t0 = time.perf_counter()
     results = []
     ctx = multiprocessing.get_context("spawn")       # each worker starts its own Blender session
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
-        futures = [pool.submit(_bake_one, job) for job in jobs]
+    n_proc = min(workers, len(jobs))
+    # each worker's numpy/BLAS gets its share of the cores: N workers x all cores oversubscribes
+    threads = str(max(1, (os.cpu_count() or 1) // n_proc))
+    saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
+    os.environ.update({k: threads for k in THREAD_VARIABLES})
+    try:
+        pool = ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx)
+        futures = [pool.submit(_bake_one, job) for job in jobs]      # workers start (and inherit) here
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    with pool:
         for fut in as_completed(futures):
             r = fut.result()
             results.append(r)

@@ -65,21 +65,30 @@ def fit_head(head: HeadModel, scan_vertices, scan_faces=None, scan_landmarks: di
     tree = cKDTree(S)
     normals = None if scan_faces is None or len(scan_faces) == 0 else vertex_normals(S, scan_faces)
 
+    # a scan is open (cut off behind the face, holes): a head vertex whose nearest scan point
+    # lies on the scan's border is beyond the scan, not on it -- it must not be pulled onto the border
+    border = np.zeros(len(S), bool)
+    if normals is not None:
+        F_ = np.asarray(scan_faces, np.int64)
+        e = np.sort(np.concatenate([F_[:, [0, 1]], F_[:, [1, 2]], F_[:, [2, 0]]]), axis=1)
+        uniq, count = np.unique(e, axis=0, return_counts=True)
+        border[uniq[count == 1].ravel()] = True
+
     def closest(points):
         d, j = tree.query(points)
         if normals is None:
-            return S[j], d
+            return S[j], d, border[j]
         off = np.einsum("ij,ij->i", points - S[j], normals[j])
         proj = points - off[:, None] * normals[j]
-        return proj, np.abs(off)
+        return proj, np.abs(off), border[j]
 
     allowed = np.ones(len(V), bool)
     for g in exclude_groups:
         allowed[head.members(g, 0.01)] = False
     history = []
     for _ in range(rounds):
-        target, dist = closest(V)
-        near = np.flatnonzero(allowed & (dist < reach_mm * s))
+        target, dist, off_scan = closest(V)
+        near = np.flatnonzero(allowed & (dist < reach_mm * s) & ~off_scan)
         near = np.setdiff1d(near, lm_idx)
         if near.size < 4:
             break
@@ -90,8 +99,8 @@ def fit_head(head: HeadModel, scan_vertices, scan_faces=None, scan_landmarks: di
         u = np.r_[move, dst - V[lm_idx]]
         rbf = RBFScattering(V[cidx], k=k * s, smoothing=smoothing)
         V = V + rbf(V, u)
-    _, dist = closest(V)
-    cov = allowed & (dist < reach_mm * s)
+    _, dist, off_scan = closest(V)
+    cov = allowed & (dist < reach_mm * s) & ~off_scan
     res = dist[cov]
     lm_rms = float(np.sqrt(np.mean(np.sum((V[lm_idx] - dst) ** 2, axis=1))))
     return FitResult(vertices=V, scale=float(s), landmark_rms_mm=lm_rms,
