@@ -46,6 +46,7 @@ def _step(name, timings, fn, *args, **kw):
 def _render_preview(obj, frames: int, fps: float, path: Path) -> None:
     """Render the baked head from the front to an H.264 file (Cycles, CPU, a few samples)."""
     from .frames import core_to_blender
+    from .video_out import h264_output
 
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
@@ -92,14 +93,7 @@ def _render_preview(obj, frames: int, fps: float, path: Path) -> None:
     lo.location = np.asarray(cam.location) + np.array([0.25, 0.0, 0.3])
     lo.rotation_euler = (np.radians(60), 0.0, np.radians(25))
     bpy.context.scene.collection.objects.link(lo)
-    if hasattr(scene.render.image_settings, "media_type"):      # Blender 5.0: stills and videos split
-        scene.render.image_settings.media_type = "VIDEO"
-    scene.render.image_settings.file_format = "FFMPEG"
-    scene.render.ffmpeg.format = "MPEG4"
-    scene.render.ffmpeg.codec = "H264"
-    scene.render.ffmpeg.constant_rate_factor = "MEDIUM"
-    scene.render.use_file_extension = False
-    scene.render.filepath = str(path)
+    h264_output(scene.render, path, "MEDIUM")
     bpy.ops.render.render(animation=True)
 
 

@@ -174,6 +174,7 @@ class MIRRORCAP_OT_solve_mirrors(MirrorCapJobOperator):
     def prepare(self, context):
         from ..core.calibrate import Board
         from ..core.camera import Camera
+        from ..core.detect import _check_camera
         from ..core.markers import load_rig_views
         from ..core.video import open_source
 
@@ -181,9 +182,7 @@ class MIRRORCAP_OT_solve_mirrors(MirrorCapJobOperator):
         board = Board.parse(self.board)
         camera = Camera.load(_need(_path(s.camera, what="camera file"), "camera file (CAMERA.json)"))
         source = open_source(_need(_path(self.board_video, what="board video"), "board video"))
-        if camera.image_size != source.size:
-            raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the "
-                             f"board video is {source.size[0]}x{source.size[1]}")
+        _check_camera(camera, source)
         layout = load_rig_views(_path(s.rig, what="rig file")) if s.rig else None
         out = _need(_path(self.output, must_exist=False), "mirrors file")
 

@@ -271,6 +271,7 @@ def main(argv=None) -> int:
     import bpy
 
     from mirrorcap.mirrorcap_addon.frames import core_to_blender
+    from mirrorcap.mirrorcap_addon.video_out import h264_output
 
     head, keys = load_head_npz(ROOT / "sample_scenes" / "generic_head" / "head.npz", with_shape_keys=True)
     rng = np.random.default_rng(args.seed)
@@ -328,15 +329,7 @@ def main(argv=None) -> int:
     strip = strips.new_image("frames", str(CACHE / "frame_0000.png"), channel=1, frame_start=1)
     for f in range(1, args.frames):
         strip.elements.append(f"frame_{f:04d}.png")
-    if hasattr(enc.render.image_settings, "media_type"):      # Blender 5.0: stills and videos split
-        enc.render.image_settings.media_type = "VIDEO"
-    enc.render.image_settings.file_format = "FFMPEG"
-    enc.render.ffmpeg.format = "MPEG4"
-    enc.render.ffmpeg.codec = "H264"
-    enc.render.ffmpeg.constant_rate_factor = "PERC_LOSSLESS"
-    enc.render.ffmpeg.gopsize = FPS
-    enc.render.use_file_extension = False
-    enc.render.filepath = str(tmp_dir / "clip.mp4")
+    h264_output(enc.render, tmp_dir / "clip.mp4", "PERC_LOSSLESS", gop_size=FPS)
     with bpy.context.temp_override(scene=enc):
         bpy.ops.render.render(animation=True, scene=enc.name)
     camera = Camera.ideal(FOCAL_PX, IMAGE_SIZE)
