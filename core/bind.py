@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .head import HeadModel
+from .head import NOT_SKIN, HeadModel
 
 
 def similarity_fit(A, B):
@@ -50,9 +50,7 @@ def _skin_surface(head: HeadModel, exclude_groups, forward_min: float = -0.2):
     from .head import vertex_normals
     from .headfit import subdivide
 
-    ok = np.ones(len(head.vertices), bool)
-    for g in exclude_groups:
-        ok[head.members(g, 0.01)] = False
+    ok = head.skin_mask(exclude_groups)
     n = head.vertex_normals()
     ok &= n @ head.face_axes()["forward"] > forward_min
     T = head.triangles()
@@ -73,12 +71,9 @@ def register_to_surface(head: HeadModel, points, exclude_groups=(), iterations: 
     0.4-2.5 times the first guess (the markers' spread against the skin's) has collapsed
     onto a patch and counts as no fit (``rms_mm`` infinite). Returns ``s, R, t, rms_mm``."""
     from scipy.spatial import cKDTree
+    from scipy.spatial.transform import Rotation
 
     from .motion import rotation_zyx
-
-    def rotation_about(axis, angle):
-        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-        return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
     P = np.asarray(points, float)
     if len(P) < 6:
@@ -107,7 +102,7 @@ def register_to_surface(head: HeadModel, points, exclude_groups=(), iterations: 
                 x = np.linalg.solve(A.T @ A + 1e-9 * np.eye(7), -A.T @ r[sel])
                 sigma, omega, tau = x[0], x[1:4], x[4:]
                 angle = np.linalg.norm(omega)
-                dR = rotation_about(omega / angle, angle) if angle > 0 else np.eye(3)
+                dR = Rotation.from_rotvec(omega).as_matrix()
                 ds = 1.0 + sigma
                 # X' = c + ds dR (X - c) + tau
                 s, R, t = ds * s, dR @ R, ds * dR @ (t - c) + c + tau
@@ -210,8 +205,7 @@ def _landmark_of(label: str, landmarks: dict):
 
 
 def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose=None,
-              exclude_groups=("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower"),
-              unseen: str = "error") -> Binding:
+              exclude_groups=NOT_SKIN, unseen: str = "error") -> Binding:
     """Register a take ``points (F, M, 3)`` (NaN = gap) to ``head``; see the module text.
     Markers not seen in the neutral frame are an error, or with ``unseen="drop"`` are left
     out (``Binding.dropped``; a tracker's markers first seen later in the take)."""
@@ -281,10 +275,7 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         aligned = s * q @ Rs.T + ts
         registration = "surface"
     # bind each marker to its nearest allowed vertex, one marker per vertex
-    allowed = np.ones(len(head.vertices), bool)
-    for g in exclude_groups:
-        allowed[head.members(g, 0.01)] = False
-    cand = np.flatnonzero(allowed)
+    cand = np.flatnonzero(head.skin_mask(exclude_groups))
     k = min(8, cand.size)
     dist, nn = cKDTree(head.vertices[cand]).query(aligned[neutral_frame], k=k)
     dist, nn = dist.reshape(M, k), nn.reshape(M, k)

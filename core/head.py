@@ -42,6 +42,8 @@ LANDMARKS = ("nose_tip", "eye_inner_l", "eye_outer_l", "eye_inner_r", "eye_outer
 RIG_LANDMARKS = ("chin", "tragus_l", "tragus_r", "nose_tip")
 #: where the jaw hinge sits relative to each tragus, in mm: (forward, down)
 HINGE_OFFSET_MM = (10.0, 5.0)
+#: groups that are not skin: markers never bind there and the scan fit leaves them alone
+NOT_SKIN = ("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower")
 
 
 def fit_sphere(points) -> tuple[np.ndarray, float]:
@@ -126,6 +128,13 @@ class HeadModel:
     def members(self, group: str, threshold: float = 0.5) -> np.ndarray:
         w = self.groups.get(group)
         return np.zeros(0, np.int64) if w is None else np.flatnonzero(w >= threshold)
+
+    def skin_mask(self, exclude=NOT_SKIN) -> np.ndarray:
+        """``(V,)`` True for vertices in none of the ``exclude`` groups (any weight counts)."""
+        mask = np.ones(len(self.vertices), bool)
+        for g in exclude:
+            mask[self.members(g, 0.01)] = False
+        return mask
 
     def landmarks(self) -> dict:
         """``{name: vertex index}`` for every non-empty ``lm_<name>`` group."""

@@ -22,7 +22,7 @@ import numpy as np
 
 from .bind import similarity_fit
 from .errors import InputError
-from .head import HeadModel, farthest_points, vertex_normals
+from .head import NOT_SKIN, HeadModel, farthest_points, vertex_normals
 from .rbf import RBFScattering
 
 
@@ -40,7 +40,7 @@ class FitResult:
 
 def fit_head(head: HeadModel, scan_vertices, scan_faces=None, scan_landmarks: dict | None = None, rounds: int = 4,
              n_controls: int = 900, reach_mm: float = 12.0, k: float = 30.0, smoothing: float = 1e-3,
-             exclude_groups=("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower")) -> FitResult:
+             exclude_groups=NOT_SKIN) -> FitResult:
     """Fit ``head`` to a scan ``(N, 3)`` (triangles ``(T, 3)`` optional) given ``{landmark: (3,) point}``."""
     from scipy.spatial import cKDTree
 
@@ -82,9 +82,7 @@ def fit_head(head: HeadModel, scan_vertices, scan_faces=None, scan_landmarks: di
         proj = points - off[:, None] * normals[j]
         return proj, np.abs(off), border[j]
 
-    allowed = np.ones(len(V), bool)
-    for g in exclude_groups:
-        allowed[head.members(g, 0.01)] = False
+    allowed = head.skin_mask(exclude_groups)
     history = []
     for _ in range(rounds):
         target, dist, off_scan = closest(V)

@@ -73,8 +73,7 @@ def place_markers(head: HeadModel, n_markers: int, seed: int = 0) -> tuple[np.nd
     region = np.zeros(len(head.vertices), bool)
     for r in REGIONS:
         region[head.members(f"region_{r}")] = True
-    for g in ("inner_lip_lower", "eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower"):
-        region[head.members(g, 0.01)] = False
+    region &= head.skin_mask()
     for side in ("l", "r"):
         lid = head.groups.get(f"eyelid_upper_{side}")
         if lid is not None:

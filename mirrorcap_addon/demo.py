@@ -32,7 +32,6 @@ from ..core.errors import InputError
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "sample_scenes" / "rig_clip"
-GENERIC_HEAD = ROOT / "sample_scenes" / "generic_head" / "head.npz"
 PREVIEW_SIZE = (480, 360)
 
 
@@ -71,10 +70,6 @@ def _render_preview(obj, frames: int, fps: float, path: Path) -> None:
         bsdf.inputs["Base Color"].default_value = (0.62, 0.47, 0.42, 1.0)
         bsdf.inputs["Roughness"].default_value = 0.6
     obj.data.materials.append(skin)
-    fill = bpy.data.lights.new("preview_fill", "AREA")
-    fill.energy = 1.5
-    fill.size = 0.6
-    fo = bpy.data.objects.new("preview_fill", fill)
     co = np.empty(len(obj.data.vertices) * 3, np.float32)
     obj.data.vertices.foreach_get("co", co)
     centre_b = np.asarray(obj.matrix_world) @ np.r_[co.reshape(-1, 3).mean(0), 1.0]
@@ -113,7 +108,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     from ..core.take import run_track
     from ..core.video import open_source
     from .bake import bake_displacements
-    from .headio import new_head_object, save_blend_atomically
+    from .headio import GENERIC_HEAD, new_head_object, save_blend_atomically
     from .take_io import import_take
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, flush=True))
@@ -144,9 +139,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     fitted = dataclasses.replace(head, vertices=fit.vertices, name="subject")
     # the fit against the subject's true shape, in the scan's frame
     true_scan = truth["subject_vertices"] @ truth["scan_rotation"].T + truth["scan_translation"]
-    skin = np.ones(len(head.vertices), bool)
-    for g in ("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower"):
-        skin[head.members(g, 0.01)] = False
+    skin = head.skin_mask()
     face = skin & (truth["subject_vertices"][:, 2] < -20.0)
     fit_err = np.linalg.norm(fit.vertices - true_scan, axis=1)[face]
 

@@ -19,6 +19,8 @@ from ..core.head import HeadModel
 from .frames import blender_to_core, core_to_blender
 
 HINGE_PROPERTY = "mirrorcap_jaw_hinge"
+#: the generic head that ships with the extension (HEAD.npz, with its faceunit shape keys)
+GENERIC_HEAD = Path(__file__).resolve().parent.parent / "sample_scenes" / "generic_head" / "head.npz"
 
 
 def new_head_object(head: HeadModel, shape_keys: dict | None = None, name: str | None = None):

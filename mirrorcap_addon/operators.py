@@ -23,7 +23,6 @@ from ..core.errors import InputError
 from .jobs import MirrorCapJobOperator, MirrorCapOperator
 from .properties import BAKE_MODES
 
-GENERIC_HEAD = Path(__file__).resolve().parent.parent / "sample_scenes" / "generic_head" / "head.npz"
 
 
 def _settings(context):
@@ -337,7 +336,7 @@ class MIRRORCAP_OT_add_generic_head(MirrorCapOperator):
 
     def run(self, context):
         from ..core.headio import load_head_npz
-        from .headio import new_head_object
+        from .headio import GENERIC_HEAD, new_head_object
 
         if not GENERIC_HEAD.is_file():
             raise InputError(f"the generic head is missing from the add-on ({GENERIC_HEAD})")

@@ -50,7 +50,6 @@ from core.head import HeadModel  # noqa: E402
 from core.headfit import subdivide  # noqa: E402
 from core.headio import load_head_npz  # noqa: E402
 from core.headsim import head_motion, performance, place_markers  # noqa: E402
-from core.mirror import reflect_points  # noqa: E402
 from core.simulate import mirror_plane_from_angles  # noqa: E402
 
 OUT = HERE / "rig_clip"
@@ -91,11 +90,8 @@ def make_scan(head: HeadModel, subject: np.ndarray, rng) -> tuple[np.ndarray, np
     """Front-of-face triangles of the subject, subdivided twice, noised and moved into a scanner
     frame; returns vertices, triangles and the landmark positions in that frame."""
     T = head.triangles()
-    skip = np.zeros(len(subject), bool)
-    for g in ("eyeball_l", "eyeball_r", "teeth_upper", "teeth_lower", "inner_lip_lower"):
-        skip[head.members(g, 0.01)] = True
     front = subject[:, 2] < -20.0                    # the face side of the ears
-    keep = np.all(front[T] & ~skip[T], axis=1)
+    keep = np.all(front[T] & head.skin_mask()[T], axis=1)
     V, T = subdivide(subject, T[keep], levels=2)
     used = np.unique(T)
     remap = np.full(len(V), -1)
@@ -184,10 +180,7 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors):
     # the subject's head (positions are set per frame); MakeHuman's helper teeth poke through
     # the chin when the jaw opens, so they are not rendered
     T = head.triangles()
-    teeth = np.zeros(len(subject), bool)
-    for g in ("teeth_upper", "teeth_lower"):
-        teeth[head.members(g, 0.01)] = True
-    T = T[~np.any(teeth[T], axis=1)]
+    T = T[np.all(head.skin_mask(("teeth_upper", "teeth_lower"))[T], axis=1)]
     mesh = bpy.data.meshes.new("subject")
     mesh.vertices.add(len(subject))
     mesh.loops.add(T.size)
