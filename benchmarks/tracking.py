@@ -60,20 +60,35 @@ def score(frames, perf, result) -> dict:
                                              max(result.stats["measured"][1:].sum(), 1))}
 
 
-def run_tracking_benchmark(n_frames: int = 150, progress=print) -> dict:
+def run_tracking_benchmark(n_frames: int = 150, progress=print, repeats: int = 3, long_frames: int = 600) -> dict:
+    """Each scenario tracked ``repeats`` times (this VM's speed varies 10-50 % from run to
+    run: the fastest and the median are reported), plus the stress scenario on a
+    ``long_frames`` take, where the per-take set-up (pairing, candidates, late markers)
+    weighs less."""
     rig = face_rig(n_markers=300, seed=3, layout="even")
-    perf = rig_performance(rig, n_frames, head_motion_deg=10, expression_mm=5)
     out = {}
-    for name, kw in SCENARIOS.items():
-        _, frames = synthetic_detections(rig, n_frames, seed=4, performance=perf, **kw)
-        t0 = time.perf_counter()
-        result = track(frames, rig.camera, rig.planes)
-        elapsed = time.perf_counter() - t0
+    runs = [(name, n_frames, kw) for name, kw in SCENARIOS.items()]
+    stress = list(SCENARIOS)[-1]
+    runs.append((f"{stress.split(':')[0]}, {long_frames} frames", long_frames, SCENARIOS[stress]))
+    for name, frames_n, kw in runs:
+        perf = rig_performance(rig, frames_n, head_motion_deg=10, expression_mm=5)
+        _, frames = synthetic_detections(rig, frames_n, seed=4, performance=perf, **kw)
+        times, stages = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            result = track(frames, rig.camera, rig.planes)
+            times.append(time.perf_counter() - t0)
+            stages.append(result.timings)
         r = score(frames, perf, result)
         del r["ids"]
-        r["frames_per_s"] = n_frames / elapsed
+        r["frames"] = frames_n
+        r["frames_per_s"] = frames_n / min(times)
+        r["frames_per_s_median"] = frames_n / float(np.median(times))
+        fastest = stages[int(np.argmin(times))]
+        r["stages_ms"] = {k: 1e3 * v for k, v in fastest.items()}
         out[name] = r
         progress(f"  {name:60s} rms {r['rms_mm']:.3f} mm  switches {r['identity_switches']}/{r['measured']}  "
                  f"reported {r['reported_of_visible'] * 100:.1f} %  conjectured p99 {r['conjectured_p99_mm']:.2f} "
-                 f"max {r['conjectured_max_mm']:.2f} mm  {r['frames_per_s']:.0f} frames/s")
+                 f"max {r['conjectured_max_mm']:.2f} mm  {r['frames_per_s']:.0f} frames/s "
+                 f"(median {r['frames_per_s_median']:.0f})")
     return out

@@ -33,8 +33,11 @@ def rigid_fit(A, B, weights=None):
     ca, cb = w @ A, w @ B
     H = (A - ca).T @ ((B - cb) * w[:, None])
     U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
+    R = Vt.T @ U.T
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0:  # a reflection: flip the weakest axis
+        Vt[2] *= -1.0
+        R = Vt.T @ U.T
     return R, cb - R @ ca
 
 
@@ -71,59 +74,68 @@ def angles_zyx(R) -> np.ndarray:
 class ConstantVelocityKalman:
     """Position-velocity Kalman filters for ``n`` items of ``dim`` coordinates
     (eq. 4.1-4.2). The 6-state model of eq. 4.1 decouples into independent
-    (position, velocity) pairs per axis, so every axis of every item is filtered in
-    one vectorised step.
+    (position, velocity) pairs per axis; as every axis of an item shares its
+    measurement variance, the axes also share one 2x2 covariance ``[[p00, p01],
+    [p01, p11]]`` per item (each ``(n, 1)``), so a step is a handful of array
+    operations for all items.
 
-    ``accel_sigma`` is the standard deviation of the velocity change per frame
-    (process noise, ``w_v``); the measurement variance is given per update and item
-    ("adjusted according to the confidence of measurement")."""
+    ``accel_sigma`` (a scalar, or one per item) is the standard deviation of the
+    velocity change per frame (process noise, ``w_v``); the measurement variance is
+    given per update and item ("adjusted according to the confidence of
+    measurement")."""
 
     position: np.ndarray  # (n, dim)
     velocity: np.ndarray  # (n, dim)
-    P: np.ndarray  # (n, dim, 2, 2)
-    accel_sigma: float = 1.0
+    p00: np.ndarray  # (n, 1) position variance
+    p01: np.ndarray  # (n, 1) position-velocity covariance
+    p11: np.ndarray  # (n, 1) velocity variance
+    accel_sigma: float | np.ndarray = 1.0
     dt: float = 1.0
 
     @classmethod
-    def start(cls, position, accel_sigma: float = 1.0, initial_sigma: float = 1.0, dt: float = 1.0):
+    def start(cls, position, accel_sigma=1.0, initial_sigma: float = 1.0, dt: float = 1.0):
         pos = np.array(position, dtype=float)
-        P = np.zeros(pos.shape + (2, 2))
-        P[..., 0, 0] = initial_sigma**2
-        P[..., 1, 1] = (10.0 * accel_sigma) ** 2
-        return cls(position=pos, velocity=np.zeros_like(pos), P=P, accel_sigma=accel_sigma, dt=dt)
+        n = pos.shape[0]
+        acc = np.broadcast_to(np.asarray(accel_sigma, float).reshape(-1, 1), (n, 1)).copy()
+        return cls(position=pos, velocity=np.zeros_like(pos), p00=np.full((n, 1), float(initial_sigma) ** 2),
+                   p01=np.zeros((n, 1)), p11=(10.0 * acc) ** 2, accel_sigma=acc, dt=dt)
+
+    @property
+    def P(self) -> np.ndarray:
+        """The covariance per item and axis, ``(n, dim, 2, 2)``."""
+        n, dim = self.position.shape
+        P = np.empty((n, dim, 2, 2))
+        P[..., 0, 0], P[..., 0, 1], P[..., 1, 0], P[..., 1, 1] = self.p00, self.p01, self.p01, self.p11
+        return P
 
     def predict(self) -> np.ndarray:
         """Advance one frame: ``s(t|t-1) = A s(t-1)``; returns the predicted positions."""
         dt = self.dt
         self.position = self.position + dt * self.velocity
-        P = self.P
-        p00, p01, p11 = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
-        q = self.accel_sigma**2
-        n00 = p00 + 2 * dt * p01 + dt * dt * p11
-        n01 = p01 + dt * p11
-        self.P = np.stack([np.stack([n00, n01], -1), np.stack([n01, p11 + q], -1)], -2)
+        self.p00 = self.p00 + dt * (2.0 * self.p01 + dt * self.p11)
+        self.p01 = self.p01 + dt * self.p11
+        self.p11 = self.p11 + self.accel_sigma ** 2
         return self.position
 
     def update(self, measured, measured_sigma, valid=None) -> np.ndarray:
         """Correct with measurements ``(n, dim)`` of standard deviation ``measured_sigma``
-        (scalar or ``(n,)``); items with ``valid`` False keep their prediction. Returns
-        the filtered positions."""
+        (scalar or ``(n,)``); items with ``valid`` False keep their prediction (their
+        measurement may be NaN). Returns the filtered positions."""
         z = np.asarray(measured, float)
-        r = np.broadcast_to(np.asarray(measured_sigma, float) ** 2, z.shape[:1])[:, None]
-        ok = np.ones(z.shape[0], bool) if valid is None else np.asarray(valid, bool)
-        P = self.P
-        s = P[..., 0, 0] + r  # innovation variance
-        k0, k1 = P[..., 0, 0] / s, P[..., 0, 1] / s  # Kalman gain
-        innov = np.where(ok[:, None], z - self.position, 0.0)
-        k0 = np.where(ok[:, None], k0, 0.0)
-        k1 = np.where(ok[:, None], k1, 0.0)
+        r = np.asarray(measured_sigma, float).reshape(-1, 1) ** 2
+        s = self.p00 + r  # innovation variance
+        k0, k1 = self.p00 / s, self.p01 / s  # Kalman gain
+        innov = z - self.position
+        if valid is not None:
+            ok = np.asarray(valid, bool)[:, None]
+            k0 = np.where(ok, k0, 0.0)
+            k1 = np.where(ok, k1, 0.0)
+            innov = np.where(ok, innov, 0.0)
         self.position = self.position + k0 * innov
         self.velocity = self.velocity + k1 * innov
-        p00, p01, p11 = P[..., 0, 0], P[..., 0, 1], P[..., 1, 1]
-        n00 = (1 - k0) * p00
-        n01 = (1 - k0) * p01
-        n11 = p11 - k1 * p01
-        self.P = np.stack([np.stack([n00, n01], -1), np.stack([n01, n11], -1)], -2)
+        self.p11 = self.p11 - k1 * self.p01
+        self.p01 = (1.0 - k0) * self.p01
+        self.p00 = (1.0 - k0) * self.p00
         return self.position
 
 
@@ -160,41 +172,46 @@ def false_tracking(motion, valid, neighbour_idx, alpha: float = 0.6667, threshol
     ``JF > threshold`` (eq. 5.6). Markers with fewer than ``min_neighbours`` valid
     neighbours are not judged. Returns ``(false (N,), JF (N,))``."""
     v = np.asarray(motion, float)
+    valid = np.asarray(valid, bool)
     nv, mask = _gather(v, neighbour_idx, valid)  # (N, K, 3)
-    d = np.linalg.norm(nv - v[:, None, :], axis=2)
-    d = np.where(mask, d, np.inf)
-    order = np.argsort(d, axis=1)
+    d = np.einsum("nkd,nkd->nk", nv - v[:, None, :], nv - v[:, None, :])
+    d[~mask] = np.inf
     count = mask.sum(axis=1)
     take = np.ceil(alpha * count).astype(int)
-    rank = np.empty_like(order)
-    np.put_along_axis(rank, order, np.arange(order.shape[1])[None, :].repeat(len(v), 0), axis=1)
-    sel = mask & (rank < take[:, None])
-    w = sel.astype(float)
+    # the alpha closest: at most the take-th smallest distance (ties are measure-zero)
+    limit = np.sort(d, axis=1)[np.arange(len(v)), np.maximum(take - 1, 0)]
+    w = (mask & (d <= limit[:, None])).astype(float)
     n = np.maximum(w.sum(axis=1), 1.0)[:, None]
-    mean = (nv * w[..., None]).sum(axis=1) / n
-    var = ((nv - mean[:, None, :]) ** 2 * w[..., None]).sum(axis=1) / n
+    mean = np.einsum("nk,nkd->nd", w, nv) / n
+    var = np.maximum(np.einsum("nk,nkd->nd", w, nv * nv) / n - mean * mean, 0.0)
     jf = np.linalg.norm((v - mean) / (np.sqrt(var) + k), axis=1)
-    judged = np.asarray(valid, bool) & (count >= min_neighbours)
+    judged = valid & (count >= min_neighbours)
     return judged & (jf > threshold), np.where(judged, jf, np.nan)
 
 
-def conjecture_motion(motion, valid, neighbour_idx, neighbour_dist, kc: float = 1.0):
+def conjecture_motion(motion, valid, neighbour_idx, neighbour_dist, kc: float = 1.0, only=None):
     """Motions of the markers not ``valid`` from their valid neighbours (eq. 5.8):
     ``v_i = sum_j w_ij v_j / sum_j w_ij`` with ``w_ij = 1 / (d_ij + kc)`` and ``d_ij`` the
     neutral-face distance. (The printed equation omits the normalisation by the sum
     of the weights, without which the result would scale with the neighbour count.)
     Returns ``(motion (N, 3), filled (N,))``; markers with no valid neighbour stay
-    unfilled (their rows are NaN)."""
+    unfilled (their rows are NaN). ``only`` (``(N,)`` bool) limits the estimate to
+    those missing markers."""
     v = np.asarray(motion, float)
-    nv, mask = _gather(np.nan_to_num(v), neighbour_idx, valid)
-    w = np.where(mask, 1.0 / (np.asarray(neighbour_dist) + kc), 0.0)
-    total = w.sum(axis=1)
-    est = (nv * w[..., None]).sum(axis=1) / np.where(total > 0, total, 1.0)[:, None]
-    missing = ~np.asarray(valid, bool)
-    filled = missing & (total > 0)
+    valid = np.asarray(valid, bool)
     out = v.copy()
-    out[filled] = est[filled]
-    out[missing & ~filled] = np.nan
+    rows = np.flatnonzero(~valid if only is None else ~valid & np.asarray(only, bool))  # missing markers only
+    filled = np.zeros(len(v), bool)
+    if rows.size == 0:
+        return out, filled
+    idx = neighbour_idx[rows]
+    safe = np.maximum(idx, 0)
+    w = np.where((idx >= 0) & valid[safe], 1.0 / (np.asarray(neighbour_dist)[rows] + kc), 0.0)
+    total = w.sum(axis=1)
+    est = np.einsum("mk,mkd->md", w, np.nan_to_num(v[safe])) / np.where(total > 0, total, 1.0)[:, None]
+    good = total > 0
+    filled[rows[good]] = True
+    out[rows] = np.where(good[:, None], est, np.nan)
     return out, filled
 
 
@@ -219,11 +236,11 @@ def conjecture_since_last_seen(motion, valid, neighbour_idx, neighbour_dist, las
     safe = np.maximum(idx, 0)
     now = v[safe]  # (M, K, 3) neighbours' motion now
     then = history[np.asarray(last_frame)[rows][:, None], safe]  # (M, K, 3) at the marker's last sighting
-    ok = (idx >= 0) & np.asarray(valid, bool)[safe] & np.all(np.isfinite(then), axis=2) & np.all(np.isfinite(now), axis=2)
+    ok = (idx >= 0) & np.asarray(valid, bool)[safe] & ~np.isnan(then[..., 0])  # (valid motions are finite)
     w = np.where(ok, 1.0 / (np.asarray(neighbour_dist)[rows] + kc), 0.0)
     total = w.sum(axis=1)
-    delta = (np.nan_to_num(now - then) * w[..., None]).sum(axis=1) / np.where(total > 0, total, 1.0)[:, None]
+    delta = np.einsum("mk,mkd->md", w, np.where(ok[..., None], now - then, 0.0))
     good = total > 0
-    out[rows[good]] = np.asarray(last_motion)[rows[good]] + delta[good]
+    out[rows[good]] = np.asarray(last_motion)[rows[good]] + delta[good] / total[good, None]
     filled[rows[good]] = True
     return out, filled

@@ -14,7 +14,8 @@ self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (coun
 labels, the rigid markers that carried the head pose); ``head_pose`` (per frame
 ``[rx, ry, rz, tx, ty, tz]``, radians and output units, eq. 5.4, relative to the first
 frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
-``conflicts``, ``conjectured``); ``timings_s``.
+``conflicts``, ``conjectured``); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
+tracker stage, ``tracking_frames_per_s``).
 """
 
 from __future__ import annotations
@@ -151,7 +152,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     "rigid": [result.labels[i] for i in result.rigid]},
         "head_pose": head.tolist(),
         "per_frame": {k: v.tolist() for k, v in result.stats.items()},
-        "timings_s": {**(timings or {}), "track": t_track,
+        "timings_s": {**(timings or {}), "track": t_track, "track_stages": result.timings,
                       "tracking_frames_per_s": len(frames) / max(t_track, 1e-9)},
     }
     files = {output: c3d_bytes(result.labels, points, rate, units=units if units == "mm" else "rel",

@@ -23,12 +23,13 @@ Everything is vectorised over markers; the loop is over frames.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .camera import Camera
-from .candidates import assign_nearest, frame_candidates
+from .candidates import ClipCandidates, ClipDetections, clip_candidates
 from .errors import DegenerateError
 from .mirror import MirrorPlane, points_from_planes
 from .motion import (
@@ -75,21 +76,27 @@ class TrackResult:
     assigned_blob: np.ndarray  # (F, N) direct blob index each frame, -1 when not measured
     colour: np.ndarray  # (N,) colour class of each marker
     head_frame: np.ndarray = None  # (F, N, 3) positions with head motion removed (NaN where not reported)
+    candidate: np.ndarray = None  # (F, N) the clip candidate each marker took (core.candidates.ClipCandidates), -1: none
     rigid: np.ndarray = None  # markers that carried the head pose
     stats: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)  # seconds per stage of :func:`track`
 
 
-def robust_rigid_fit(A, B, iterations: int = 5):
+def robust_rigid_fit(A, B, iterations: int = 5, weights=None):
     """Rigid fit with iteratively reweighted least squares: markers moving with the
     expression (large residuals) get small weights, so the pose follows the rigid part
-    of the face."""
-    w = np.ones(len(A))
+    of the face. ``weights`` (``(n,)``) start the iteration (e.g. last frame's);
+    returns ``R, t`` and the final weights."""
+    w = np.ones(len(A)) if weights is None else np.asarray(weights, float)
+    half = len(A) // 2
     for _ in range(iterations):
         R, t = rigid_fit(A, B, w)
-        r = np.linalg.norm(A @ R.T + t - B, axis=1)
-        s = 1.4826 * np.median(r) + 1e-6
+        d = A @ R.T + t - B
+        r = np.sqrt(np.einsum("ij,ij->i", d, d))
+        s = 1.4826 * np.partition(r, half)[half] + 1e-6  # robust scale: the median residual
         w = 1.0 / (1.0 + (r / (2.0 * s)) ** 2)
-    return rigid_fit(A, B, w)
+    R, t = rigid_fit(A, B, w)
+    return R, t, w
 
 
 def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int):
@@ -171,7 +178,7 @@ def _initial_markers(frames, camera, normals, ds, settings):
         new = ~known & np.all(np.isfinite(pos[f]), axis=1)
         common = known & np.all(np.isfinite(pos[f]), axis=1)
         if new.any() and common.sum() >= 6:
-            R, T = robust_rigid_fit(pos[f, common], neutral[common])  # frame f -> frame 0
+            R, T, _ = robust_rigid_fit(pos[f, common], neutral[common])  # frame f -> frame 0
             neutral[new] = pos[f, new] @ R.T + T
             known |= new
     keep = np.flatnonzero(known)
@@ -188,27 +195,60 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     not given they are found automatically: a first pass estimates the pose from all
     markers (robustly), then the ``rigid_fraction`` of markers that moved least
     relative to the head -- forehead, nose bridge, temples on a real face -- carry the
-    pose in a second pass."""
+    pose in a second pass.
+
+    The detections are flattened and undistorted once, and the 3D candidates of every
+    frame are found in one vectorised pass (``core.candidates.clip_candidates``) before
+    the frame loop."""
     s = settings or TrackSettings()
     normals = np.stack([np.asarray(getattr(pl, "normal", pl[0] if isinstance(pl, tuple) else None), float)
                         for pl in planes])
     ds = np.array([float(getattr(pl, "d", pl[1] if isinstance(pl, tuple) else np.nan)) for pl in planes])
     if len(frames) < 2:
         raise DegenerateError("tracking needs at least 2 frames")
+    clock = [time.perf_counter()]
+    timings = {}
+
+    def lap(name):
+        clock.append(time.perf_counter())
+        timings[name] = clock[-1] - clock[-2]
+
     markers = _initial_markers(frames, camera, normals, ds, s)
     n_initial = len(markers[1])
+    lap("initial_markers")
+    det = ClipDetections.from_frames(frames, camera)
+    z_mid = float(np.median(markers[1][:, 2]))
+    cands = clip_candidates(det, normals, ds, camera.focal_px, s.band_px,
+                            (z_mid - s.depth_margin_mm, z_mid + s.depth_margin_mm))
+    lap("candidates")
     given = None if rigid is None else np.asarray(rigid, int)
-    first = _track_pass(frames, camera, normals, ds, s, markers, given, None)
+    first = _track_pass(det, cands, s, markers, given, None)
+    lap("first_pass")
     if given is None:
         motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
         motion = np.where(np.isfinite(motion), motion, np.inf)
         n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
         given = np.argsort(motion)[:n_rigid]
-    markers = _add_late_markers(frames, camera, normals, ds, s, markers, first)
-    result = _track_pass(frames, camera, normals, ds, s, markers, given, progress)
+    markers = _add_late_markers(det, cands, s, markers, first, camera.focal_px)
+    lap("late_markers")
+    result = _track_pass(det, cands, s, markers, given, progress)
     result.rigid = given
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
-    return _keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
+    result = _keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
+    lap("final_pass")
+    result.timings = timings
+    return result
+
+
+def _earns_place(measured, min_frames: int, min_fraction: float) -> np.ndarray:
+    """The markers that :func:`_keep_measured` keeps, from ``measured`` ``(F, N)``."""
+    F = measured.shape[0]
+    first = np.argmax(measured, axis=0)
+    last = F - 1 - np.argmax(measured[::-1], axis=0)
+    span = F - first
+    count = measured.sum(axis=0)
+    lost = (count < min_fraction * span) & (F - 1 - last > 0.75 * span)
+    return (count >= min_frames) & ~lost
 
 
 def _keep_measured(result: TrackResult, min_frames: int, min_fraction: float = 0.0) -> TrackResult:
@@ -220,13 +260,8 @@ def _keep_measured(result: TrackResult, min_frames: int, min_fraction: float = 0
     keeps coming back, and stays.) Nothing is reported for a marker before its first
     measurement."""
     measured = result.assigned_blob >= 0
-    F = measured.shape[0]
     first = np.argmax(measured, axis=0)
-    last = F - 1 - np.argmax(measured[::-1], axis=0)
-    span = F - first
-    count = measured.sum(axis=0)
-    lost = (count < min_fraction * span) & (F - 1 - last > 0.75 * span)
-    keep = np.flatnonzero((count >= min_frames) & ~lost)
+    keep = np.flatnonzero(_earns_place(measured, min_frames, min_fraction))
     before = np.arange(measured.shape[0])[:, None] < first[None, :]
     result.points[before] = np.nan
     result.head_frame[before] = np.nan
@@ -236,7 +271,7 @@ def _keep_measured(result: TrackResult, min_frames: int, min_fraction: float = 0
     old_to_new[keep] = np.arange(keep.size)
     rigid = old_to_new[result.rigid]
     result.rigid = rigid[rigid >= 0]
-    for name in ("points", "conjectured", "camera_mask", "assigned_blob", "head_frame"):
+    for name in ("points", "conjectured", "camera_mask", "assigned_blob", "head_frame", "candidate"):
         setattr(result, name, getattr(result, name)[:, keep])
     for name in ("neutral", "first_blob", "colour"):
         setattr(result, name, getattr(result, name)[keep])
@@ -245,146 +280,238 @@ def _keep_measured(result: TrackResult, min_frames: int, min_fraction: float = 0
     return result
 
 
-def _add_late_markers(frames, camera, normals, ds, s, markers, first_pass):
-    """Markers the initial window missed (hidden at the start, turned into view later):
-    direct-view tracks over the whole clip that pair with a mirror track but were never
-    claimed by a tracked marker. Each enters at its head-frame position when first
-    paired (the first pass's head pose); one within 4 mm of an existing (or an earlier
-    added) marker is the same marker found again and is not added."""
+def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
+                      focal_px: float, link_mm: float = 1.0, link_frames: int = 3, min_frames: int = 5,
+                      same_marker_mm: float = 4.0, same_ray_px: float = 2.0, min_support: float = 0.6,
+                      max_rms_factor: float = 2.0):
+    """Markers the initial window missed (hidden at the start, turned into view later).
+
+    Candidates the first pass left alone -- their direct blob and their mirror blobs
+    unclaimed by any tracked marker -- are taken into the head frame (the first pass's
+    head pose) and linked: two of the same colour within ``link_mm`` of each other and
+    at most ``link_frames`` frames apart belong together. A chain seen in at least
+    ``min_frames`` frames, and in ``min_support`` of the frames it spans, with an RMS
+    band residual within ``max_rms_factor`` of the tracked markers', is a marker (a
+    chance alignment of two markers' blobs drifts in and out of the band, anywhere
+    in it: ``core.pairing`` has the same test); it enters at its head-frame position when first
+    seen. A chain that mostly runs within ``same_marker_mm`` of an existing marker, or
+    within ``same_ray_px`` of its image (its direct blob, paired with a wrong mirror
+    blob), is that marker found again and is not added; nor is one entering within
+    ``same_marker_mm`` of an existing (or an earlier added) marker, nor one sharing a
+    blob with a better supported chain. Chance pairings with false blobs
+    are scattered in space and time and do not chain."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     first_blob, neutral, colour = markers
-    F = len(frames)
-    dids, n_dt, partner, mids_all = _paired_tracks(frames, camera, normals, ds, s.band_px, 5)
-    claimed = np.zeros(n_dt, bool)
-    for t in range(F):
-        ab = first_pass.assigned_blob[t]
-        claimed[dids[t][ab[ab >= 0]]] = True
-    new_tracks = np.flatnonzero((partner >= 0).any(axis=0) & ~claimed)
-    if new_tracks.size == 0:
+    F = det.n_frames
+    K = cands.mirror_blob.shape[1]
+    taken = [np.zeros(len(det.frame[v]), bool) for v in range(K + 1)]
+    claimed = first_pass.candidate[first_pass.candidate >= 0]
+    taken[0][cands.direct[claimed]] = True
+    for k in range(K):
+        mb = cands.mirror_blob[claimed, k]
+        taken[k + 1][mb[mb >= 0]] = True
+    free = ~taken[0][cands.direct]
+    for k in range(K):
+        mb = cands.mirror_blob[:, k]
+        free &= (mb < 0) | ~taken[k + 1][np.maximum(mb, 0)]
+    idx = np.flatnonzero(free)
+    if idx.size < min_frames:
         return markers
-    pos, _, new_colour = _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all, new_tracks)
-    seen = np.all(np.isfinite(pos), axis=2)  # (F, M)
-    has = seen.any(axis=0)
-    first = np.argmax(seen, axis=0)
-    X = pos[first, np.arange(new_tracks.size)]
-    pose = first_pass.head_pose[first]
+    f = cands.frame[idx]
+    pose = first_pass.head_pose[f]
     R = rotation_zyx(pose[:, :3])  # (M, 3, 3)
-    head = np.einsum("mji,mj->mi", R, X - pose[:, 3:])  # R^T (X - T): into the head frame of frame 0
-    head, new_colour = head[has], new_colour[has]
-    far = cKDTree(neutral).query(head)[0] > 4.0 if len(head) else np.zeros(0, bool)
+    head = np.einsum("mji,mj->mi", R, cands.points[idx] - pose[:, 3:])  # R^T (X - T)
+    col = det.colour[0][cands.direct[idx]]
+    pairs = cKDTree(np.c_[head, col * COLOUR_SPACING_MM]).query_pairs(link_mm, output_type="ndarray")
+    gap = np.abs(f[pairs[:, 0]] - f[pairs[:, 1]]) if len(pairs) else np.zeros(0, int)
+    pairs = pairs[(gap >= 1) & (gap <= link_frames)] if len(pairs) else pairs
+    n_comp, comp = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                                   shape=(idx.size, idx.size)), directed=False)
+    # frames per chain (a chain may hold two candidates of one frame: count frames once)
+    key = np.unique(comp * (F + 1) + f)
+    support = np.bincount(key // (F + 1), minlength=n_comp)
+    # a true pair sits in the band every frame both blobs are seen, as close as the
+    # detection noise allows; a chance alignment drifts in and out, anywhere in the band
+    first_f = np.full(n_comp, F)
+    last_f = np.full(n_comp, -1)
+    np.minimum.at(first_f, comp, f)
+    np.maximum.at(last_f, comp, f)
+    rms = np.sqrt(np.bincount(comp, cands.residual_px[idx] ** 2, minlength=n_comp) / np.bincount(comp, minlength=n_comp))
+    true_rms = np.sqrt(np.mean(cands.residual_px[claimed] ** 2)) if claimed.size else np.inf
+    good = np.flatnonzero((support >= min_frames) & (support >= min_support * (last_f - first_f + 1))
+                          & (rms <= max_rms_factor * true_rms))
+    if good.size == 0:
+        return markers
+    # a chain that runs along an existing marker (frames the first pass missed it in) is that marker
+    member = np.flatnonzero(np.isin(comp, good))
+    # (near it in 3D), or that pairs an existing marker's direct blob with a wrong mirror blob (on its ray)
+    # (markers that will not earn their place -- wrong pairings, lost for good -- do not count)
+    real = _earns_place(first_pass.assigned_blob >= 0, s.min_measured_frames, s.min_measured_fraction)
+    gap_mm = np.nan_to_num(first_pass.head_frame[f[member]][:, real], nan=1e9) - head[member, None]  # (M, N, 3)
+    d = np.sqrt(np.einsum("mnd,mnd->mn", gap_mm, gap_mm).min(axis=1, initial=np.inf))
+    seen = np.nan_to_num(first_pass.points[f[member]][:, real], nan=1e9)
+    ray = seen[..., :2] / np.maximum(seen[..., 2:], 1e-9) - det.norm[0][cands.direct[idx[member]]][:, None]
+    d_px = np.sqrt(np.einsum("mnd,mnd->mn", ray, ray).min(axis=1, initial=np.inf)) * focal_px
+    near_existing = np.bincount(comp[member], (d <= same_marker_mm) | (d_px <= same_ray_px), minlength=n_comp)
+    good = good[near_existing[good] < 0.5 * np.bincount(comp[member], minlength=n_comp)[good]]
+    if good.size == 0:
+        return markers
+    # one blob is one marker: chains sharing a blob (a marker's chain and its chance
+    # pairings with another unclaimed blob) compete, and the best supported one wins
+    cand_of = idx[member]
+    blob_keys = [cands.direct[cand_of]] + [np.where(cands.mirror_blob[cand_of, k] >= 0,
+                                                     cands.mirror_blob[cand_of, k], -1) for k in range(K)]
+    used = [np.zeros(len(det.frame[v]), bool) for v in range(K + 1)]
+    by_chain = np.argsort(comp[member], kind="stable")
+    bounds = np.searchsorted(comp[member][by_chain], np.arange(n_comp + 1))
+    order = np.lexsort((np.arange(idx.size), f, comp))
+    first_of = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]  # each chain's first candidate
+    entry_of = np.full(n_comp, -1)
+    entry_of[comp[first_of]] = first_of
     keep = []
-    for q in np.flatnonzero(far):  # the few candidates left, against each other
-        if not keep or np.min(np.linalg.norm(head[keep] - head[q], axis=1)) > 4.0:
-            keep.append(q)
+    for c in good[np.argsort(-support[good], kind="stable")]:  # the chains left (tens), best supported first
+        rows = by_chain[bounds[c]:bounds[c + 1]]
+        blobs = [key[rows] for key in blob_keys]
+        if any(used[v][b[b >= 0]].any() for v, b in enumerate(blobs)):
+            continue
+        q = entry_of[c]
+        if real.any() and np.min(np.linalg.norm(neutral[real] - head[q], axis=1)) <= same_marker_mm:
+            continue
+        if keep and np.min(np.linalg.norm(head[keep] - head[q], axis=1)) <= same_marker_mm:
+            continue
+        for v, b in enumerate(blobs):
+            used[v][b[b >= 0]] = True
+        keep.append(q)
+    keep.sort(key=lambda q: (f[q], q))  # markers in order of appearance
     if not keep:
         return markers
-    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, head[keep]]),
-            np.r_[colour, new_colour[keep]])
+    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, head[keep]]), np.r_[colour, col[keep]])
 
 
-def _track_pass(frames, camera: Camera, normals, ds, s: TrackSettings, markers, rigid, progress) -> TrackResult:
-    F = len(frames)
+COLOUR_SPACING_MM = 1.0e4  # colour classes as a 4th coordinate: one KD-tree serves every class
+
+
+def _resolve_conflicts(a, near, keys, starts):
+    """Conflicts (procedure step 6): a 2D blob -- direct, or in a mirror -- claimed by
+    two markers in one frame stays with the marker closest to its prediction.
+    ``a`` ``(N,)`` candidate per marker (-1: none), ``near`` its distance, ``keys`` the
+    candidates' blob per view (``(C,)`` each, -1: none), ``starts`` each view's first
+    blob of the frame. Returns the markers that lost."""
+    valid = a >= 0
+    lost = np.zeros(len(a), bool)
+    if not valid.any():
+        return lost
+    chosen = a[valid]
+    # every view's blobs numbered apart within the frame: one count finds every shared blob
+    claimed = np.concatenate([key[chosen] - first + 1e6 * v for v, (key, first) in enumerate(zip(keys, starts))])
+    claimed = claimed[claimed - 1e6 * np.repeat(np.arange(len(keys)), chosen.size) >= 0].astype(np.int64)
+    if np.unique(claimed).size == claimed.size:
+        return lost
+    for key, first in zip(keys, starts):
+        blob = np.where(valid, key[np.maximum(a, 0)], -1)
+        order = np.lexsort((near, blob))
+        dup = np.r_[False, (blob[order][1:] == blob[order][:-1]) & (blob[order][1:] >= 0)]
+        lost[order[dup]] = True
+        valid &= ~lost
+    return lost
+
+
+def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, rigid, progress) -> TrackResult:
+    """One pass of the procedure over the clip (module docstring, steps 4-8)."""
+    from scipy.spatial import cKDTree
+
+    F = det.n_frames
     first_blob, neutral, colour = markers
     N = len(neutral)
     nidx, ndist = neighbours(neutral, s.neighbour_radius_mm)
-    z_mid = float(np.median(neutral[:, 2]))
-    depth_range = (z_mid - s.depth_margin_mm, z_mid + s.depth_margin_mm)
     kf = ConstantVelocityKalman.start(neutral, accel_sigma=s.accel_sigma_mm, initial_sigma=s.measure_sigma_mm)
-    kf_rot = ConstantVelocityKalman.start(np.zeros((1, 3)), accel_sigma=s.pose_accel_sigma[0],
-                                          initial_sigma=s.pose_measure_sigma[0])
-    kf_tr = ConstantVelocityKalman.start(np.zeros((1, 3)), accel_sigma=s.pose_accel_sigma[1],
-                                         initial_sigma=s.pose_measure_sigma[1])
+    pose_kf = ConstantVelocityKalman.start(np.zeros((2, 3)), accel_sigma=s.pose_accel_sigma,
+                                           initial_sigma=0.0)  # rotation (rad), translation (mm): exact at frame 0
+    pose_sigma = np.asarray(s.pose_measure_sigma, float)
     points = np.full((F, N, 3), np.nan)
     head_frame = np.full((F, N, 3), np.nan)
+    history = np.full((F, N, 3), np.nan)  # head-frame motion per frame, for conjectures since a last sighting
     last_motion = np.zeros((N, 3))  # each marker's motion at its last measurement
     last_frame = np.full(N, -1)
     innovation = np.full(N, s.gate_mm / 4.0)  # per marker, moving average; starts at the widest gate
     conjectured = np.zeros((F, N), bool)
-    camera_mask = np.zeros((F, N), int)
+    camera_mask = np.zeros((F, N), np.int8)
     head_pose = np.zeros((F, 6))
     assigned_blob = np.full((F, N), -1)
+    candidate = np.full((F, N), -1)
     counts = {k: np.zeros(F, int) for k in ("candidates", "measured", "false_tracking", "conflicts", "conjectured")}
+    is_rigid = np.ones(N, bool) if rigid is None else np.isin(np.arange(N), rigid)
+    pose_weights = np.ones(N)  # robust weights, carried from frame to frame
+    cand_key = np.c_[cands.points, det.colour[0][cands.direct] * COLOUR_SPACING_MM]
+    query = np.c_[neutral, colour * COLOUR_SPACING_MM]
+    K = cands.mirror_blob.shape[1]
+    keys = [cands.direct] + [cands.mirror_blob[:, k] for k in range(K)]
+    view_bit = (2 ** np.arange(1, K + 1))[None, :]
     for t in range(F):
-        fr = frames[t]
-        R_p = rotation_zyx(kf_rot.predict()[0])
-        T_p = kf_tr.predict()[0]
-        pred_h = kf.predict()
-        pred_cam = pred_h @ R_p.T + T_p
-        cand = frame_candidates(camera.normalize(fr.direct), fr.direct_color,
-                                [camera.normalize(m) for m in fr.mirror], fr.mirror_color, normals, ds,
-                                camera.focal_px, band_px=s.band_px, depth_range=depth_range)
-        counts["candidates"][t] = len(cand.direct)
+        sl = cands.at(t)
+        counts["candidates"][t] = sl.stop - sl.start
+        pose_pred = pose_kf.predict()
+        R_p, T_p = rotation_zyx(pose_pred[0]), pose_pred[1]
+        query[:, :3] = kf.predict() @ R_p.T + T_p
         # each marker's gate follows how well it has been predicted lately: tight where
         # predictions are good (fewer chance candidates), wide where the face moves fast
         gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
-        # one-to-one within each colour class: a marker only takes candidates of its colour
-        a = np.full(N, -1)
-        cand_colour = np.asarray(fr.direct_color)[cand.direct] if len(cand.direct) else np.zeros(0, int)
-        for c in np.unique(colour):
-            mk = np.flatnonzero(colour == c)
-            cc = np.flatnonzero(cand_colour == c)
-            if cc.size:
-                got = assign_nearest(pred_cam[mk], cand.points[cc], s.gate_mm)
-                a[mk] = np.where(got >= 0, cc[np.maximum(got, 0)], -1)
-        # (a blank frame has no candidate: pad so that indexing stays valid; nothing is assigned)
-        cpts = cand.points if len(cand.points) else np.zeros((1, 3))
-        near = np.linalg.norm(cpts[np.maximum(a, 0)] - pred_cam, axis=1)
-        a = np.where((a >= 0) & (near <= gate_i), a, -1)
-        valid = a >= 0
-        # conflicts: one 2D blob claimed by two markers -> keep the one closest to its prediction
-        err = np.where(valid, near, np.inf)
-        keys = [cand.direct] + [cand.mirror_blob[:, k] for k in range(cand.mirror_blob.shape[1])]
-        for key in keys if len(cand.points) else []:
-            blob = np.where(valid, key[np.maximum(a, 0)], -1)
-            order = np.lexsort((err, blob))
-            dup = np.r_[False, (blob[order][1:] == blob[order][:-1]) & (blob[order][1:] >= 0)]
-            loser = order[dup]
-            counts["conflicts"][t] += loser.size
-            valid[loser] = False
-        meas_cam = cpts[np.maximum(a, 0)]
-        use = valid if rigid is None else valid & np.isin(np.arange(N), rigid)
+        if sl.stop > sl.start:
+            near, j = cKDTree(cand_key[sl]).query(query, distance_upper_bound=s.gate_mm)
+            valid = near <= gate_i
+            a = np.where(valid, j + sl.start, -1)
+            lost = _resolve_conflicts(a, near, keys, [det.start[v][t] for v in range(K + 1)])
+            counts["conflicts"][t] = lost.sum()
+            valid &= ~lost
+        else:
+            valid, a, near = np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf)
+        meas_cam = cands.points[np.maximum(a, 0)] if len(cands.points) else np.zeros((N, 3))
+        use = valid & is_rigid
         if use.sum() >= 4:
-            R_m, T_m = robust_rigid_fit(neutral[use], meas_cam[use])
-            kf_rot.update(angles_zyx(R_m)[None], s.pose_measure_sigma[0])
-            kf_tr.update(T_m[None], s.pose_measure_sigma[1])
-        R = rotation_zyx(kf_rot.position[0])
-        T = kf_tr.position[0]
-        head_pose[t] = np.r_[kf_rot.position[0], T]
+            R_m, T_m, w = robust_rigid_fit(neutral[use], meas_cam[use], iterations=1, weights=pose_weights[use])
+            pose_weights[use] = w
+            pose_kf.update(np.stack([angles_zyx(R_m), T_m]), pose_sigma)
+        R, T = rotation_zyx(pose_kf.position[0]), pose_kf.position[1]
+        head_pose[t] = pose_kf.position.ravel()
         meas_h = (meas_cam - T) @ R  # R^T (x - T): head motion removed
-        motion = np.where(valid[:, None], meas_h - neutral, np.nan)
-        false, _ = false_tracking(np.nan_to_num(motion), valid, nidx, threshold=s.false_threshold)
+        motion = np.where(valid[:, None], meas_h - neutral, 0.0)
+        false, _ = false_tracking(motion, valid, nidx, threshold=s.false_threshold)
         counts["false_tracking"][t] = false.sum()
         valid &= ~false
-        motion[false] = np.nan
+        motion[~valid] = np.nan
         innovation[valid] = 0.8 * innovation[valid] + 0.2 * near[valid]
         # markers seen before: their own last motion plus the neighbours' motion since;
         # never seen (or no such neighbour): eq. 5.8 from the neighbours' motion now
-        since, filled_since = conjecture_since_last_seen(motion, valid, nidx, ndist, last_motion, last_frame,
-                                                         head_frame - neutral[None])
-        filled_motion, filled = conjecture_motion(motion, valid, nidx, ndist)
-        filled_motion = np.where(filled_since[:, None], since, filled_motion)
-        filled |= filled_since
-        z = np.where(valid[:, None], meas_h, neutral + np.nan_to_num(filled_motion))
-        sigma = np.where(valid, s.measure_sigma_mm, s.conjecture_sigma_mm)
-        out_h = kf.update(z, sigma, valid | filled)
+        filled_motion, filled = conjecture_since_last_seen(motion, valid, nidx, ndist, last_motion, last_frame,
+                                                           history)
+        if (~valid & ~filled).any():
+            now, filled_now = conjecture_motion(motion, valid, nidx, ndist, only=~filled)
+            filled_motion = np.where(filled_now[:, None], now, filled_motion)
+            filled |= filled_now
         reported = valid | filled
+        z = np.where(valid[:, None], meas_h, neutral + filled_motion)
+        out_h = kf.update(z, np.where(valid, s.measure_sigma_mm, s.conjecture_sigma_mm), reported)
         last_motion[valid] = motion[valid]
         last_frame[valid] = t
         kf.velocity[~reported] = 0.0  # lost and not conjecturable: hold still rather than drift away
-        points[t] = np.where(reported[:, None], out_h @ R.T + T, np.nan)
-        head_frame[t] = np.where(reported[:, None], out_h, np.nan)
+        out_h = np.where(reported[:, None], out_h, np.nan)
+        head_frame[t] = out_h
+        history[t] = out_h - neutral
+        points[t] = out_h @ R.T + T
         conjectured[t] = filled
         counts["conjectured"][t] = filled.sum()
         counts["measured"][t] = valid.sum()
-        if len(cand.points):
-            blobs = cand.mirror_blob[np.maximum(a, 0)]
-            mask = 1 | ((blobs[:, 0] >= 0) << 1) | (((blobs[:, 1] >= 0) << 2) if blobs.shape[1] > 1 else 0)
-            camera_mask[t] = np.where(valid, mask, 0)
-            assigned_blob[t] = np.where(valid, cand.direct[np.maximum(a, 0)], -1)
+        if valid.any():
+            blobs = cands.mirror_blob[a[valid]]
+            camera_mask[t, valid] = 1 | ((blobs >= 0) * view_bit).sum(axis=1)
+            assigned_blob[t, valid] = cands.direct[a[valid]] - det.start[0][t]
+            candidate[t, valid] = a[valid]
         if progress:
             progress(t + 1, F)
     labels = [f"m{i:03d}" for i in range(N)]
-    return TrackResult(labels=labels, points=points, conjectured=conjectured, camera_mask=camera_mask,
+    return TrackResult(labels=labels, points=points, conjectured=conjectured, camera_mask=camera_mask.astype(int),
                        head_pose=head_pose, neutral=neutral, first_blob=first_blob, assigned_blob=assigned_blob,
-                       colour=colour, head_frame=head_frame, stats=counts)
+                       colour=colour, head_frame=head_frame, candidate=candidate, stats=counts)

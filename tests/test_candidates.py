@@ -71,3 +71,28 @@ def test_assignment_is_one_to_one_and_gated():
     nan = assign_nearest(np.full((2, 3), np.nan), truth[:3], gate=4.0)
     assert np.all(nan == -1)
     assert np.all(assign_nearest(truth[:3], np.zeros((0, 3)), 4.0) == -1)
+
+
+def test_clip_band_search_finds_exactly_the_pairs_of_a_full_comparison():
+    """The whole-take band search (pencil keys + binary search) must return the same
+    (direct, mirror) pairs as testing every pair of every frame against eq. 5.2-5.3."""
+    from core.candidates import ClipDetections, _same_frame_pairs, band_pairs
+
+    rig = face_rig(n_markers=300, seed=3, layout="even")
+    _, frames = synthetic_detections(rig, 12, noise_px=0.1, seed=7, missing=0.1, false_blobs=0.5)
+    det = ClipDetections.from_frames(frames, rig.camera)
+    f = rig.camera.focal_px
+    for k, (normal, _) in enumerate(rig.planes):
+        i, j, dist = band_pairs(det.norm[0], det.frame[0], det.norm[k + 1], det.frame[k + 1], normal, f, 1.0)
+        bi, bj = _same_frame_pairs(det.frame[0], det.frame[k + 1])
+        assert np.all(det.frame[0][bi] == det.frame[k + 1][bj]) and bi.size > 100 * len(frames)
+        p, q = det.norm[0][bi], det.norm[k + 1][bj]
+        a, b, c = normal
+        l0, l1, l2 = b - c * p[:, 1], c * p[:, 0] - a, a * p[:, 1] - b * p[:, 0]
+        full = np.abs(l0 * q[:, 0] + l1 * q[:, 1] + l2) * f / np.hypot(l0, l1)
+        inside = full <= 1.0
+        assert set(zip(i.tolist(), j.tolist())) == set(zip(bi[inside].tolist(), bj[inside].tolist()))
+        assert i.size > 2 * len(frames) * 50 and np.all(dist <= 1.0)
+        # and the band really is narrow: a wider band finds more pairs
+        wide = band_pairs(det.norm[0], det.frame[0], det.norm[k + 1], det.frame[k + 1], normal, f, 3.0)[0]
+        assert wide.size > 1.5 * i.size

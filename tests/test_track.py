@@ -77,9 +77,9 @@ def test_stress_harness_occlusions_false_candidates(performance):
     ratio = result.stats["candidates"][1:].sum() / result.stats["measured"][1:].sum()
     assert ratio > 2.3
     assert s["rms"] < 0.2  # mm; measured 0.075
-    assert s["switches"] <= 0.0005 * s["measured"]  # measured 6 in 24,638, all to false blobs
-    assert s["reported_of_visible"] >= 0.98  # measured 98.3 %
-    assert s["conj_p99"] < 2.0  # measured 1.73 mm
+    assert s["switches"] <= 0.0005 * s["measured"]  # measured 8 in 25,001, all to false blobs
+    assert s["reported_of_visible"] >= 0.98  # measured 99.3 %
+    assert s["conj_p99"] < 2.0  # measured 1.83 mm
 
 
 def test_a_blank_frame_mid_clip_is_bridged(performance):
