@@ -1,7 +1,6 @@
 """Per-frame steps of the tracker (Lin 2003, the procedure at the end of chapter 5):
-3D candidates through the mirrored epipolar band (step 4) and the one-to-one
-assignment of predicted markers to candidates (step 6). Both are vectorised over
-all detections of a frame; they are the tracker's hot loop.
+3D candidates through the mirrored epipolar band (step 4), for one frame or for
+every frame of a take at once, vectorised over all detections.
 """
 
 from __future__ import annotations
@@ -223,52 +222,3 @@ def frame_candidates(direct_n, direct_color, mirror_n, mirror_color, normals, ds
                          start=[np.array([0, len(n)]) for n in norm])
     c = clip_candidates(det, normals, ds, focal_px, band_px, depth_range)
     return Candidates3D(c.points, c.direct, c.mirror_blob, c.residual_px)
-
-
-def assign_nearest(predicted, candidates, gate: float):
-    """One-to-one assignment of predicted marker positions ``(N, 3)`` to candidate
-    positions ``(C, 3)`` within ``gate`` (procedure step 6). Mutual nearest
-    neighbours (from KD-trees) are accepted directly; only the markers and
-    candidates left in conflict go through ``linear_sum_assignment``. Returns
-    ``(N,)`` candidate indices, -1 for no candidate within the gate."""
-    from scipy.optimize import linear_sum_assignment
-    from scipy.spatial import cKDTree
-
-    pred = np.asarray(predicted, float)
-    cand = np.asarray(candidates, float)
-    out = np.full(len(pred), -1)
-    if len(pred) == 0 or len(cand) == 0:
-        return out
-    ok_pred = np.all(np.isfinite(pred), axis=1)
-    tree_c = cKDTree(cand)
-    d_pc, nn_pc = tree_c.query(np.where(ok_pred[:, None], pred, 0.0), distance_upper_bound=gate)
-    d_pc[~ok_pred] = np.inf
-    tree_p = cKDTree(pred[ok_pred])
-    pred_index = np.flatnonzero(ok_pred)
-    _, nn_cp = tree_p.query(cand, distance_upper_bound=gate)
-    has = np.isfinite(d_pc)
-    mutual = has.copy()
-    back = nn_cp[np.minimum(nn_pc, len(cand) - 1)]
-    mutual[has] = (back[has] < len(pred_index)) & (pred_index[np.minimum(back[has], len(pred_index) - 1)]
-                                                    == np.flatnonzero(has))
-    # a candidate claimed as nearest by several markers is a conflict, even if mutual for one
-    claimed = np.bincount(nn_pc[has], minlength=len(cand) + 1)
-    mutual &= has & (claimed[np.minimum(nn_pc, len(cand))] == 1)
-    out[mutual] = nn_pc[mutual]
-    rest = np.flatnonzero(has & ~mutual)
-    if rest.size:
-        taken = np.zeros(len(cand), bool)
-        taken[out[mutual]] = True
-        near = tree_c.query_ball_point(pred[rest], gate)
-        rows = np.repeat(np.arange(rest.size), [len(n) for n in near])
-        cols = np.concatenate([np.asarray(n, int) for n in near]) if rows.size else np.zeros(0, int)
-        free = ~taken[cols]
-        rows, cols = rows[free], cols[free]
-        if rows.size:
-            uc, cinv = np.unique(cols, return_inverse=True)
-            cost = np.full((rest.size, uc.size), 1e9)
-            cost[rows, cinv] = np.linalg.norm(pred[rest[rows]] - cand[cols], axis=1)
-            r, c = linear_sum_assignment(cost)
-            good = cost[r, c] < 1e9
-            out[rest[r[good]]] = uc[c[good]]
-    return out

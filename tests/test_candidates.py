@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.candidates import assign_nearest, frame_candidates
+from core.candidates import frame_candidates
 from core.simulate import face_rig, rig_motion, synthetic_detections
 
 
@@ -52,25 +52,20 @@ def test_a_narrow_depth_range_removes_candidates(frame):
     assert 0 < len(narrow.direct) < len(wide.direct)
 
 
-def test_assignment_is_one_to_one_and_gated():
-    rng = np.random.default_rng(0)
-    truth = rng.uniform(-80, 80, (300, 3)) + [0, 0, 600]
-    perm = rng.permutation(300)
-    distractors = truth + rng.normal(size=(300, 3)) * 3 + 8.0  # > gate away
-    cand = np.vstack([truth[perm], distractors])
-    pred = truth + rng.normal(0, 0.3, truth.shape)
-    a = assign_nearest(pred, cand, gate=4.0)
-    assert np.array_equal(a, np.argsort(perm))
-    # conflicts: two predictions on one candidate -> at most one gets it
-    pred2 = np.vstack([truth[:1], truth[:1] + 0.1])
-    a2 = assign_nearest(pred2, truth[:1], gate=4.0)
-    assert sorted(a2.tolist()) == [-1, 0]
-    # the gate, and unknown predictions
-    far = assign_nearest(truth[:3] + 10.0, truth[:3], gate=4.0)
-    assert np.all(far == -1)
-    nan = assign_nearest(np.full((2, 3), np.nan), truth[:3], gate=4.0)
-    assert np.all(nan == -1)
-    assert np.all(assign_nearest(truth[:3], np.zeros((0, 3)), 4.0) == -1)
+def test_a_blob_claimed_twice_stays_with_the_closer_prediction():
+    """Procedure step 6's conflicts, as the tracker resolves them: two markers on
+    candidates sharing a direct blob, or sharing a mirror blob, -> the one predicted
+    closer keeps it; markers on distinct blobs are untouched."""
+    from core.track import _resolve_conflicts
+
+    direct = np.array([10, 10, 11, 12, 13])  # candidates 0 and 1 share direct blob 10
+    mirror0 = np.array([-1, 20, 21, 22, 22])  # candidates 3 and 4 share mirror blob 22
+    mirror1 = np.array([30, -1, -1, -1, -1])
+    a = np.array([0, 1, 2, 3, 4, -1])  # marker -> candidate
+    near = np.array([0.4, 0.2, 0.3, 0.1, 0.5, np.inf])
+    lost = _resolve_conflicts(a, near, [direct, mirror0, mirror1], [10, 20, 30])
+    assert lost.tolist() == [True, False, False, False, True, False]
+    assert not _resolve_conflicts(np.array([2, 3, -1]), near[:3], [direct, mirror0, mirror1], [10, 20, 30]).any()
 
 
 def test_clip_band_search_finds_exactly_the_pairs_of_a_full_comparison():
