@@ -345,10 +345,10 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
                           & (rms <= max_rms_factor * true_rms))
     if good.size == 0:
         return markers
-    # a chain that runs along an existing marker (frames the first pass missed it in) is that marker
+    # a chain that mostly runs along an existing marker is that marker: near it in 3D (frames
+    # the first pass missed it in), or on its image (its direct blob with a wrong mirror blob).
+    # Markers that will not earn their place (wrong pairings, lost for good) do not count.
     member = np.flatnonzero(np.isin(comp, good))
-    # (near it in 3D), or that pairs an existing marker's direct blob with a wrong mirror blob (on its ray)
-    # (markers that will not earn their place -- wrong pairings, lost for good -- do not count)
     real = _earns_place(first_pass.assigned_blob >= 0, s.min_measured_frames, s.min_measured_fraction)
     gap_mm = np.nan_to_num(first_pass.head_frame[f[member]][:, real], nan=1e9) - head[member, None]  # (M, N, 3)
     d = np.sqrt(np.einsum("mnd,mnd->mn", gap_mm, gap_mm).min(axis=1, initial=np.inf))
@@ -362,8 +362,7 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     # one blob is one marker: chains sharing a blob (a marker's chain and its chance
     # pairings with another unclaimed blob) compete, and the best supported one wins
     cand_of = idx[member]
-    blob_keys = [cands.direct[cand_of]] + [np.where(cands.mirror_blob[cand_of, k] >= 0,
-                                                     cands.mirror_blob[cand_of, k], -1) for k in range(K)]
+    blob_keys = [cands.direct[cand_of]] + [cands.mirror_blob[cand_of, k] for k in range(K)]
     used = [np.zeros(len(det.frame[v]), bool) for v in range(K + 1)]
     by_chain = np.argsort(comp[member], kind="stable")
     bounds = np.searchsorted(comp[member][by_chain], np.arange(n_comp + 1))
@@ -394,23 +393,22 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
 COLOUR_SPACING_MM = 1.0e4  # colour classes as a 4th coordinate: one KD-tree serves every class
 
 
-def _resolve_conflicts(a, near, keys, starts):
+def _resolve_conflicts(a, near, keys):
     """Conflicts (procedure step 6): a 2D blob -- direct, or in a mirror -- claimed by
     two markers in one frame stays with the marker closest to its prediction.
     ``a`` ``(N,)`` candidate per marker (-1: none), ``near`` its distance, ``keys`` the
-    candidates' blob per view (``(C,)`` each, -1: none), ``starts`` each view's first
-    blob of the frame. Returns the markers that lost."""
+    candidates' blob per view (``(C,)`` each, -1: none). Returns the markers that lost."""
     valid = a >= 0
     lost = np.zeros(len(a), bool)
     if not valid.any():
         return lost
     chosen = a[valid]
-    # every view's blobs numbered apart within the frame: one count finds every shared blob
-    claimed = np.concatenate([key[chosen] - first + 1e6 * v for v, (key, first) in enumerate(zip(keys, starts))])
-    claimed = claimed[claimed - 1e6 * np.repeat(np.arange(len(keys)), chosen.size) >= 0].astype(np.int64)
-    if np.unique(claimed).size == claimed.size:
+    shared = [np.unique(b).size < b.size for b in (key[chosen][key[chosen] >= 0] for key in keys)]
+    if not any(shared):
         return lost
-    for key, first in zip(keys, starts):
+    for key, clash in zip(keys, shared):
+        if not clash:
+            continue
         blob = np.where(valid, key[np.maximum(a, 0)], -1)
         order = np.lexsort((near, blob))
         dup = np.r_[False, (blob[order][1:] == blob[order][:-1]) & (blob[order][1:] >= 0)]
@@ -463,7 +461,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             near, j = cKDTree(cand_key[sl]).query(query, distance_upper_bound=s.gate_mm)
             valid = near <= gate_i
             a = np.where(valid, j + sl.start, -1)
-            lost = _resolve_conflicts(a, near, keys, [det.start[v][t] for v in range(K + 1)])
+            lost = _resolve_conflicts(a, near, keys)
             counts["conflicts"][t] = lost.sum()
             valid &= ~lost
         else:

@@ -63,9 +63,9 @@ def test_a_blob_claimed_twice_stays_with_the_closer_prediction():
     mirror1 = np.array([30, -1, -1, -1, -1])
     a = np.array([0, 1, 2, 3, 4, -1])  # marker -> candidate
     near = np.array([0.4, 0.2, 0.3, 0.1, 0.5, np.inf])
-    lost = _resolve_conflicts(a, near, [direct, mirror0, mirror1], [10, 20, 30])
+    lost = _resolve_conflicts(a, near, [direct, mirror0, mirror1])
     assert lost.tolist() == [True, False, False, False, True, False]
-    assert not _resolve_conflicts(np.array([2, 3, -1]), near[:3], [direct, mirror0, mirror1], [10, 20, 30]).any()
+    assert not _resolve_conflicts(np.array([2, 3, -1]), near[:3], [direct, mirror0, mirror1]).any()
 
 
 def test_clip_band_search_finds_exactly_the_pairs_of_a_full_comparison():
