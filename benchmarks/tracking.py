@@ -44,14 +44,21 @@ def score(frames, perf, result) -> dict:
     err = np.linalg.norm(result.points - perf[0][:, np.maximum(ids, 0)], axis=2)
     reported = np.all(np.isfinite(result.points), axis=2)
     meas = reported & ~result.conjectured
+    # reported-of-visible counts true markers: two tracked markers of one true marker
+    # (a duplicate) report it once
+    n_true = perf[0].shape[1]
+    rep_true = np.zeros((F, n_true), bool)
+    np.logical_or.at(rep_true, (slice(None), np.maximum(ids, 0)), reported & (ids >= 0)[None])
     vis_total = rep_vis = 0
     for t in range(F):
         seen = (set(frames[t].direct_id.tolist())
                 & (set(frames[t].mirror_id[0].tolist()) | set(frames[t].mirror_id[1].tolist()))) - {-1}
         vis_total += len(seen)
-        rep_vis += int(np.sum(reported[t] & np.isin(ids, list(seen))))
+        rep_vis += int(np.sum(rep_true[t, list(seen)]))
+    tracked, times_tracked = np.unique(ids[ids >= 0], return_counts=True)
     ce = err[result.conjectured]
-    return {"ids": ids, "markers": N, "measured": measured, "identity_switches": switches,
+    return {"ids": ids, "markers": N, "duplicates": int(np.sum(times_tracked > 1)),
+            "measured": measured, "identity_switches": switches,
             "rms_mm": float(np.sqrt(np.mean(err[meas] ** 2))), "reported_of_visible": rep_vis / vis_total,
             "conjectured_rms_mm": float(np.sqrt(np.mean(ce ** 2))) if ce.size else 0.0,
             "conjectured_p99_mm": float(np.percentile(ce, 99)) if ce.size else 0.0,

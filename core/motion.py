@@ -157,7 +157,10 @@ def _gather(values, idx, valid):
     """values[idx] with padding and invalid neighbours masked: ``(N, K, ...), mask (N, K)``."""
     safe = np.maximum(idx, 0)
     mask = (idx >= 0) & np.asarray(valid, bool)[safe]
-    return values[safe], mask
+    return np.take(values, safe, axis=0), mask  # (np.take: several times faster than values[safe])
+
+
+_ONES3 = np.ones(3)
 
 
 def false_tracking(motion, valid, neighbour_idx, alpha: float = 0.6667, threshold: float = 3.0,
@@ -170,21 +173,24 @@ def false_tracking(motion, valid, neighbour_idx, alpha: float = 0.6667, threshol
     them -- give a per-axis mean and standard deviation; ``JF`` is the norm of
     ``(v_i - mean) / (std + k)`` (eq. 5.7) and the tracking is false when
     ``JF > threshold`` (eq. 5.6). Markers with fewer than ``min_neighbours`` valid
-    neighbours are not judged. Returns ``(false (N,), JF (N,))``."""
+    neighbours are not judged. Returns ``(false (N,), JF (N,))``.
+
+    (Sums over the 3 coordinates and over neighbours are matrix products: numpy's
+    reductions over short axes cost several times more.)"""
     v = np.asarray(motion, float)
     valid = np.asarray(valid, bool)
     nv, mask = _gather(v, neighbour_idx, valid)  # (N, K, 3)
-    d = np.einsum("nkd,nkd->nk", nv - v[:, None, :], nv - v[:, None, :])
+    d = np.square(nv - v[:, None, :]) @ _ONES3
     d[~mask] = np.inf
     count = mask.sum(axis=1)
     take = np.ceil(alpha * count).astype(int)
     # the alpha closest: at most the take-th smallest distance (ties are measure-zero)
     limit = np.sort(d, axis=1)[np.arange(len(v)), np.maximum(take - 1, 0)]
-    w = (mask & (d <= limit[:, None])).astype(float)
-    n = np.maximum(w.sum(axis=1), 1.0)[:, None]
-    mean = np.einsum("nk,nkd->nd", w, nv) / n
-    var = np.maximum(np.einsum("nk,nkd->nd", w, nv * nv) / n - mean * mean, 0.0)
-    jf = np.linalg.norm((v - mean) / (np.sqrt(var) + k), axis=1)
+    w = (mask & (d <= limit[:, None])).astype(float)[:, None, :]  # (N, 1, K)
+    n = np.maximum(w.sum(axis=2), 1.0)
+    mean = (w @ nv)[:, 0] / n
+    var = np.maximum((w @ (nv * nv))[:, 0] / n - mean * mean, 0.0)
+    jf = np.sqrt(np.square((v - mean) / (np.sqrt(var) + k)) @ _ONES3)
     judged = valid & (count >= min_neighbours)
     return judged & (jf > threshold), np.where(judged, jf, np.nan)
 
@@ -208,7 +214,7 @@ def conjecture_motion(motion, valid, neighbour_idx, neighbour_dist, kc: float = 
     safe = np.maximum(idx, 0)
     w = np.where((idx >= 0) & valid[safe], 1.0 / (np.asarray(neighbour_dist)[rows] + kc), 0.0)
     total = w.sum(axis=1)
-    est = np.einsum("mk,mkd->md", w, np.nan_to_num(v[safe])) / np.where(total > 0, total, 1.0)[:, None]
+    est = (w[:, None, :] @ np.nan_to_num(np.take(v, safe, axis=0)))[:, 0] / np.where(total > 0, total, 1.0)[:, None]
     good = total > 0
     filled[rows[good]] = True
     out[rows] = np.where(good[:, None], est, np.nan)
@@ -234,12 +240,12 @@ def conjecture_since_last_seen(motion, valid, neighbour_idx, neighbour_dist, las
         return out, filled
     idx = neighbour_idx[rows]  # (M, K)
     safe = np.maximum(idx, 0)
-    now = v[safe]  # (M, K, 3) neighbours' motion now
+    now = np.take(v, safe, axis=0)  # (M, K, 3) neighbours' motion now
     then = history[np.asarray(last_frame)[rows][:, None], safe]  # (M, K, 3) at the marker's last sighting
     ok = (idx >= 0) & np.asarray(valid, bool)[safe] & ~np.isnan(then[..., 0])  # (valid motions are finite)
     w = np.where(ok, 1.0 / (np.asarray(neighbour_dist)[rows] + kc), 0.0)
     total = w.sum(axis=1)
-    delta = np.einsum("mk,mkd->md", w, np.where(ok[..., None], now - then, 0.0))
+    delta = (w[:, None, :] @ np.where(ok[..., None], now - then, 0.0))[:, 0]
     good = total > 0
     out[rows[good]] = np.asarray(last_motion)[rows[good]] + delta[good] / total[good, None]
     filled[rows[good]] = True

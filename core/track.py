@@ -236,8 +236,49 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
     result = _keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     lap("final_pass")
+    _fill_gaps(result, s.neighbour_radius_mm)
+    lap("gap_fill")
     result.timings = timings
     return result
+
+
+def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0) -> None:
+    """Conjectures inside a gap, redone from both of its ends (the take is offline, so
+    the frame where a hidden marker shows again is known). The pass's conjecture at
+    frame ``t`` is one-sided: the marker's motion at its last measurement ``a`` plus
+    its neighbours' motion since (eq. 5.8 weights). Here the same estimate is also made
+    from its next measurement ``b`` -- its motion there plus the neighbours' motion
+    from ``b`` to ``t`` -- and the two are blended linearly across the gap, so the
+    conjecture meets the measurements at both ends. Neighbours count where they are
+    measured at ``t`` and reported at ``a`` and ``b``; with none, the marker's motion is
+    interpolated between its ends. A gap still open at the end of the take keeps the
+    pass's conjecture. Updates ``points`` and ``head_frame`` in place."""
+    measured = result.assigned_blob >= 0
+    F, N = measured.shape
+    frames = np.arange(F)[:, None]
+    last = np.maximum.accumulate(np.where(measured, frames, -1), axis=0)
+    nxt = np.minimum.accumulate(np.where(measured, frames, F)[::-1], axis=0)[::-1]
+    t, i = np.nonzero(result.conjectured & (last >= 0) & (nxt < F))
+    if t.size == 0:
+        return
+    a, b = last[t, i], nxt[t, i]
+    motion = result.head_frame - result.neutral[None]  # (F, N, 3), NaN where not reported
+    nidx, ndist = neighbours(result.neutral, radius_mm)
+    j = np.maximum(nidx[i], 0)  # (M, K)
+    ok = (nidx[i] >= 0) & measured[t[:, None], j]
+    ok &= np.isfinite(motion[a[:, None], j, 0]) & np.isfinite(motion[b[:, None], j, 0])
+    w = np.where(ok, 1.0 / (ndist[i] + kc), 0.0)
+    total = np.maximum(w.sum(axis=1), 1e-12)[:, None]
+    now = np.nan_to_num(motion[t[:, None], j])
+
+    def since(anchor):  # the neighbours' weighted motion from the anchor frame to t (zero with none)
+        return np.einsum("mk,mkd->md", w, now - np.nan_to_num(motion[anchor[:, None], j])) / total
+
+    u = ((t - a) / (b - a))[:, None]
+    head = result.neutral[i] + (1.0 - u) * (motion[a, i] + since(a)) + u * (motion[b, i] + since(b))
+    result.head_frame[t, i] = head
+    R = rotation_zyx(result.head_pose[t, :3])
+    result.points[t, i] = np.einsum("mij,mj->mi", R, head) + result.head_pose[t, 3:]
 
 
 def _earns_place(measured, min_frames: int, min_fraction: float) -> np.ndarray:
@@ -293,13 +334,14 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     ``min_frames`` frames, and in ``min_support`` of the frames it spans, with an RMS
     band residual within ``max_rms_factor`` of the tracked markers', is a marker (a
     chance alignment of two markers' blobs drifts in and out of the band, anywhere
-    in it: ``core.pairing`` has the same test); it enters at its head-frame position when first
-    seen. A chain that mostly runs within ``same_marker_mm`` of an existing marker, or
+    in it: ``core.pairing`` has the same test). A chain that mostly runs within ``same_marker_mm`` of an existing marker, or
     within ``same_ray_px`` of its image (its direct blob, paired with a wrong mirror
-    blob), is that marker found again and is not added; nor is one entering within
-    ``same_marker_mm`` of an existing (or an earlier added) marker, nor one sharing a
+    blob), is that marker found again and is not added; nor is one whose neutral
+    position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
     blob with a better supported chain. Chance pairings with false blobs
-    are scattered in space and time and do not chain."""
+    are scattered in space and time and do not chain. A marker added gets as its
+    neutral position where it was first seen, less its neighbours' motion then
+    (:func:`_motion_near`)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
@@ -370,24 +412,44 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     first_of = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]  # each chain's first candidate
     entry_of = np.full(n_comp, -1)
     entry_of[comp[first_of]] = first_of
+    # where each chain's marker sits in the neutral face: where it first shows, less its
+    # neighbours' motion then -- two chains of one marker (split by a long gap) land together
+    q_of = entry_of[good]
+    at_rest = np.full((n_comp, 3), np.nan)
+    at_rest[good] = head[q_of] - _motion_near(first_pass, real, head[q_of], f[q_of], s.neighbour_radius_mm)
     keep = []
     for c in good[np.argsort(-support[good], kind="stable")]:  # the chains left (tens), best supported first
         rows = by_chain[bounds[c]:bounds[c + 1]]
         blobs = [key[rows] for key in blob_keys]
         if any(used[v][b[b >= 0]].any() for v, b in enumerate(blobs)):
             continue
-        q = entry_of[c]
-        if real.any() and np.min(np.linalg.norm(neutral[real] - head[q], axis=1)) <= same_marker_mm:
+        if real.any() and np.min(np.linalg.norm(neutral[real] - at_rest[c], axis=1)) <= same_marker_mm:
             continue
-        if keep and np.min(np.linalg.norm(head[keep] - head[q], axis=1)) <= same_marker_mm:
+        if keep and np.min(np.linalg.norm(at_rest[keep] - at_rest[c], axis=1)) <= same_marker_mm:
             continue
         for v, b in enumerate(blobs):
             used[v][b[b >= 0]] = True
-        keep.append(q)
-    keep.sort(key=lambda q: (f[q], q))  # markers in order of appearance
+        keep.append(c)
+    keep.sort(key=lambda c: (f[entry_of[c]], entry_of[c]))  # markers in order of appearance
     if not keep:
         return markers
-    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, head[keep]]), np.r_[colour, col[keep]])
+    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
+            np.r_[colour, col[entry_of[keep]]])
+
+
+def _motion_near(first_pass, real, where, frame, radius_mm: float, kc: float = 1.0):
+    """The expression motion at ``where`` ``(M, 3)`` (head frame) in ``frame`` ``(M,)``:
+    eq. 5.8's weighted combination of the motions of the ``real`` markers of
+    ``first_pass`` within ``radius_mm`` (zero where none was measured). A late marker's
+    neutral position is where it first shows minus this motion, so that its own motion,
+    like every other marker's, is measured from the neutral face (the neighbour test
+    of eq. 5.6-5.7 and the conjectures compare motions)."""
+    near = first_pass.neutral[real]  # (R, 3)
+    d = np.linalg.norm(near[None] - where[:, None], axis=2)  # (M, R)
+    motion = first_pass.head_frame[frame][:, real] - near[None]  # (M, R, 3)
+    w = np.where((d <= radius_mm) & np.isfinite(motion[..., 0]), 1.0 / (d + kc), 0.0)
+    total = w.sum(axis=1, keepdims=True)
+    return np.einsum("mr,mrd->md", w, np.nan_to_num(motion)) / np.where(total > 0, total, 1.0)
 
 
 COLOUR_SPACING_MM = 1.0e4  # colour classes as a 4th coordinate: one KD-tree serves every class

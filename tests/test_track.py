@@ -16,7 +16,7 @@ def _score(frames, perf, result):
     r = score(frames, perf, result)
     return {"ids": r["ids"], "switches": r["identity_switches"], "measured": r["measured"], "rms": r["rms_mm"],
             "conj_rms": r["conjectured_rms_mm"], "conj_p99": r["conjectured_p99_mm"],
-            "reported_of_visible": r["reported_of_visible"]}
+            "reported_of_visible": r["reported_of_visible"], "duplicates": r["duplicates"]}
 
 
 @pytest.fixture(scope="module")
@@ -33,8 +33,11 @@ def test_clean_performance_is_tracked_without_identity_switches(performance):
     assert len(result.labels) > 190
     assert s["switches"] == 0
     assert s["rms"] < 0.1  # mm, markers at 600 mm
-    assert s["conj_rms"] < 1.0 and s["conj_p99"] < 2.0  # measured 0.47 and 1.65 mm
-    assert s["reported_of_visible"] >= 0.98  # measured 98.5 %
+    assert s["conj_rms"] < 1.0 and s["conj_p99"] < 2.0  # measured 0.37 and 1.48 mm
+    # markers that turn into view later are found (measured 99.8 %; 98.5 % when a late
+    # marker entered at its first-seen position, expression and all, and then failed
+    # the neighbour test)
+    assert s["reported_of_visible"] >= 0.99
     assert len(set(s["ids"].tolist())) == len(s["ids"])  # one marker per label
     # head pose from automatically found rigid markers follows the true turn (up to 10 deg);
     # fitting all markers instead is biased by the expression (measured ~1 deg)
@@ -57,7 +60,8 @@ def test_faults_missing_and_false_blobs(performance):
     s = _score(frames, perf, result)
     assert s["switches"] <= 0.001 * s["measured"]
     assert s["rms"] < 0.2
-    assert s["reported_of_visible"] >= 0.98 and s["conj_p99"] < 2.5  # measured 98.4 % and 1.98 mm
+    assert s["reported_of_visible"] >= 0.99 and s["conj_p99"] < 2.5  # measured 99.2 % and 1.65 mm
+    assert s["duplicates"] == 0
     assert result.conjectured.sum() > 0 and result.stats["false_tracking"].sum() > 0
     assert np.all(result.camera_mask[result.conjectured] == 0)
     measured = np.all(np.isfinite(result.points), axis=2) & ~result.conjectured
@@ -75,11 +79,21 @@ def test_stress_harness_occlusions_false_candidates(performance):
     result = track(frames, rig.camera, rig.planes)
     s = _score(frames, perf, result)
     ratio = result.stats["candidates"][1:].sum() / result.stats["measured"][1:].sum()
-    assert ratio > 2.3
-    assert s["rms"] < 0.2  # mm; measured 0.075
-    assert s["switches"] <= 0.0005 * s["measured"]  # measured 8 in 25,001, all to false blobs
-    assert s["reported_of_visible"] >= 0.98  # measured 99.3 %
-    assert s["conj_p99"] < 2.0  # measured 1.83 mm
+    assert ratio > 2.3  # measured 2.34
+    assert s["rms"] < 0.2  # mm; measured 0.078
+    assert s["switches"] <= 0.0005 * s["measured"]  # measured 8 in 25,231, all to false blobs
+    assert s["reported_of_visible"] >= 0.99  # measured 99.75 %
+    assert s["duplicates"] == 0  # two chains of one late marker are one marker (were 4)
+    assert s["conj_p99"] < 2.0  # measured 1.65 mm
+    # conjectures inside a gap are blended from both of its ends (measured 0.32 mm RMS;
+    # 0.43 mm from the last sighting alone)
+    measured = result.assigned_blob >= 0
+    frames_i = np.arange(measured.shape[0])[:, None]
+    seen_before = np.maximum.accumulate(np.where(measured, frames_i, -1), axis=0) >= 0
+    seen_after = np.minimum.accumulate(np.where(measured, frames_i, 10**9)[::-1], axis=0)[::-1] < 10**9
+    inside = result.conjectured & seen_before & seen_after
+    err = np.linalg.norm(result.points - perf[0][:, s["ids"]], axis=2)
+    assert inside.sum() > 5000 and np.sqrt(np.mean(err[inside] ** 2)) < 0.38
 
 
 def test_a_blank_frame_mid_clip_is_bridged(performance):
