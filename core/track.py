@@ -163,7 +163,8 @@ def _initial_markers(frames, camera, normals, ds, settings):
     first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
     markers both frames share (so markers hidden at frame 0 are tracked too).
     Returns each marker's frame-0 direct blob (-1 if absent), the neutral structure
-    (N, 3) and the markers' colour classes (N,)."""
+    (N, 3), the markers' colour classes (N,) and the frame each is measured from (N,),
+    here 0."""
     W = min(settings.init_frames, len(frames))
     init = frames[:W]
     dids, n_dt, partner, mids_all = _paired_tracks(init, camera, normals, ds, settings.band_px, min(5, W))
@@ -182,7 +183,7 @@ def _initial_markers(frames, camera, normals, ds, settings):
             neutral[new] = pos[f, new] @ R.T + T
             known |= new
     keep = np.flatnonzero(known)
-    return blob[0, keep], neutral[keep], colour[keep]
+    return blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)
 
 
 def track(frames, camera: Camera, planes, settings: TrackSettings | None = None, progress=None,
@@ -341,12 +342,14 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     blob with a better supported chain. Chance pairings with false blobs
     are scattered in space and time and do not chain. A marker added gets as its
     neutral position where it was first seen, less its neighbours' motion then
-    (:func:`_motion_near`)."""
+    (:func:`_motion_near`), and is measured from the first frame of its chains on
+    (before, its position is only a conjecture, and a false blob near that would be
+    taken for it)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    first_blob, neutral, colour = markers
+    first_blob, neutral, colour, entry = markers
     F = det.n_frames
     K = cands.mirror_blob.shape[1]
     taken = [np.zeros(len(det.frame[v]), bool) for v in range(K + 1)]
@@ -417,7 +420,7 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     q_of = entry_of[good]
     at_rest = np.full((n_comp, 3), np.nan)
     at_rest[good] = head[q_of] - _motion_near(first_pass, real, head[q_of], f[q_of], s.neighbour_radius_mm)
-    keep = []
+    keep, seen_from = [], {}
     for c in good[np.argsort(-support[good], kind="stable")]:  # the chains left (tens), best supported first
         rows = by_chain[bounds[c]:bounds[c + 1]]
         blobs = [key[rows] for key in blob_keys]
@@ -425,16 +428,21 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
             continue
         if real.any() and np.min(np.linalg.norm(neutral[real] - at_rest[c], axis=1)) <= same_marker_mm:
             continue
-        if keep and np.min(np.linalg.norm(at_rest[keep] - at_rest[c], axis=1)) <= same_marker_mm:
-            continue
+        if keep:
+            gap = np.linalg.norm(at_rest[keep] - at_rest[c], axis=1)
+            if gap.min() <= same_marker_mm:  # another stretch of a marker kept: it is seen from then
+                same = keep[int(np.argmin(gap))]
+                seen_from[same] = min(seen_from[same], first_f[c])
+                continue
         for v, b in enumerate(blobs):
             used[v][b[b >= 0]] = True
         keep.append(c)
-    keep.sort(key=lambda c: (f[entry_of[c]], entry_of[c]))  # markers in order of appearance
+        seen_from[c] = first_f[c]
+    keep.sort(key=lambda c: (seen_from[c], entry_of[c]))  # markers in order of appearance
     if not keep:
         return markers
     return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
-            np.r_[colour, col[entry_of[keep]]])
+            np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
 
 
 def _motion_near(first_pass, real, where, frame, radius_mm: float, kc: float = 1.0):
@@ -484,7 +492,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
     from scipy.spatial import cKDTree
 
     F = det.n_frames
-    first_blob, neutral, colour = markers
+    first_blob, neutral, colour, entry = markers
     N = len(neutral)
     nidx, ndist = neighbours(neutral, s.neighbour_radius_mm)
     kf = ConstantVelocityKalman.start(neutral, accel_sigma=s.accel_sigma_mm, initial_sigma=s.measure_sigma_mm)
@@ -521,7 +529,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
         gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
         if sl.stop > sl.start:
             near, j = cKDTree(cand_key[sl]).query(query, distance_upper_bound=s.gate_mm)
-            valid = near <= gate_i
+            valid = (near <= gate_i) & (entry <= t)  # a late marker is measured from its first sighting on
             a = np.where(valid, j + sl.start, -1)
             lost = _resolve_conflicts(a, near, keys)
             counts["conflicts"][t] = lost.sum()
