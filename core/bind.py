@@ -26,6 +26,7 @@ import numpy as np
 
 from .errors import InputError
 from .head import NOT_SKIN, HeadModel
+from .motion import previous_and_next
 
 
 def similarity_fit(A, B):
@@ -130,11 +131,7 @@ def fill_gaps(points) -> np.ndarray:
         bad = np.flatnonzero(~valid.any(axis=0))
         raise InputError(f"{bad.size} markers are never measured (first: index {bad[0]})")
     t = np.arange(F)
-    # index of the previous and next valid frame per (frame, marker), vectorised
-    prev = np.where(valid, t[:, None], -1)
-    prev = np.maximum.accumulate(prev, axis=0)
-    nxt = np.where(valid, t[:, None], F)
-    nxt = np.minimum.accumulate(nxt[::-1], axis=0)[::-1]
+    prev, nxt = previous_and_next(valid)  # the previous and next valid frame per (frame, marker)
     prev_c = np.where(prev < 0, nxt, prev)
     nxt_c = np.where(nxt >= F, prev_c, nxt)
     cols = np.arange(M)[None, :]

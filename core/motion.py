@@ -139,6 +139,18 @@ class ConstantVelocityKalman:
         return self.position
 
 
+def previous_and_next(valid):
+    """For ``valid`` ``(F, N)``: the frame of each item's last valid frame at or before
+    each frame (-1: none yet) and of its next one at or after it (``F``: none left),
+    both ``(F, N)`` -- the two ends of every gap, vectorised."""
+    valid = np.asarray(valid, bool)
+    F = valid.shape[0]
+    t = np.arange(F)[:, None]
+    prev = np.maximum.accumulate(np.where(valid, t, -1), axis=0)
+    nxt = np.minimum.accumulate(np.where(valid, t, F)[::-1], axis=0)[::-1]
+    return prev, nxt
+
+
 # -------------------------------------------------------- neighbour statistics
 def neighbours(neutral, radius: float, max_neighbours: int = 24):
     """Markers within ``radius`` of each marker in the neutral face (itself excluded):

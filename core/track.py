@@ -39,6 +39,7 @@ from .motion import (
     conjecture_since_last_seen,
     false_tracking,
     neighbours,
+    previous_and_next,
     rigid_fit,
     rotation_zyx,
 )
@@ -255,10 +256,8 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0) -> None:
     interpolated between its ends. A gap still open at the end of the take keeps the
     pass's conjecture. Updates ``points`` and ``head_frame`` in place."""
     measured = result.assigned_blob >= 0
-    F, N = measured.shape
-    frames = np.arange(F)[:, None]
-    last = np.maximum.accumulate(np.where(measured, frames, -1), axis=0)
-    nxt = np.minimum.accumulate(np.where(measured, frames, F)[::-1], axis=0)[::-1]
+    F = measured.shape[0]
+    last, nxt = previous_and_next(measured)
     t, i = np.nonzero(result.conjectured & (last >= 0) & (nxt < F))
     if t.size == 0:
         return
