@@ -173,6 +173,7 @@ def _gather(values, idx, valid):
 
 
 _ONES3 = np.ones(3)
+_EYE3 = np.eye(3)
 
 
 def false_tracking(motion, valid, neighbour_idx, alpha: float = 0.6667, threshold: float = 3.0,
@@ -231,6 +232,73 @@ def conjecture_motion(motion, valid, neighbour_idx, neighbour_dist, kc: float = 
     filled[rows[good]] = True
     out[rows] = np.where(good[:, None], est, np.nan)
     return out, filled
+
+
+def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.0, min_frames: int = 10,
+                        block_values: int = 2_000_000):
+    """Eq. 5.8 with the neighbour relations learned from the take (offline, whole take known).
+
+    Eq. 5.8 assumes a hidden marker moves as its neighbours do (``v_i = v_j``, weighted by
+    distance). Here each pair -- a marker ``i`` of ``rows`` and each of its neighbours ``j``
+    (``neighbour_idx``, nearest first) -- gets its own linear relation, fitted over the
+    frames where both are measured by regularised least squares:
+    ``v_i ~= (v_j - mean_j) B_ij + mean_i``, ``B_ij`` 3x3, shrunk towards eq. 5.8's
+    ``B = I`` with strength ``ridge`` (mm^2: as if ``ridge`` mm^2 of motion had been seen
+    moving one-to-one). So a pair with little shared motion falls back on eq. 5.8, and a
+    pair seen over a whole range of expressions follows its data. A pair needs
+    ``min_frames`` shared frames. Where ``i`` is not measured, its motion is the
+    mean of the relations of the neighbours measured there, each weighted by the inverse of
+    its fit's residual variance -- so a lip marker follows the lip markers that moved like
+    it, not the cheek beside it.
+
+    ``motion`` ``(F, N, 3)`` (anything where not ``measured`` ``(F, N)``); returns
+    ``(estimate (F, P, 3), variance (F, P))`` for the ``P`` markers of ``rows``: the
+    estimate at every frame (measured or not, so that callers can compare it with the
+    measurements) and the variance of the weighted mean (mm^2); NaN and inf where no
+    related neighbour is measured. Markers are done in blocks of about ``block_values``
+    numbers, so memory stays bounded on long takes."""
+    measured = np.asarray(measured, bool)
+    F, N = measured.shape
+    rows = np.asarray(rows, int)
+    vz = np.where(measured[..., None], np.nan_to_num(np.asarray(motion, float)), 0.0)
+    K = neighbour_idx.shape[1]
+    est = np.full((F, rows.size, 3), np.nan)
+    var = np.full((F, rows.size), np.inf)
+    step = max(1, int(block_values // max(K * F * 3, 1)))
+    for lo in range(0, rows.size, step):
+        r = rows[lo:lo + step]
+        P = r.size
+        idx = neighbour_idx[r]                                       # (P, K)
+        js = np.maximum(idx, 0)
+        mi = measured[:, r].T                                        # (P, F)
+        mj = np.take(measured, js, axis=1).transpose(1, 2, 0) & (idx >= 0)[..., None]  # (P, K, F)
+        vi = vz[:, r].transpose(1, 0, 2)                             # (P, F, 3)
+        vj = np.take(vz, js, axis=1).transpose(1, 2, 0, 3)           # (P, K, F, 3), zero where unmeasured
+        both = (mi[:, None] & mj).astype(float)                      # (P, K, F)
+        n = both.sum(axis=2)                                         # (P, K)
+        nn = np.maximum(n, 1.0)[..., None]
+        mean_i = (both @ vi) / nn                                    # (P, K, 3)
+        vjb = vj * both[..., None]
+        mean_j = vjb.sum(axis=2) / nn                                # (P, K, 3)
+        # centred second moments over the shared frames, from raw sums (no (P, K, F, 3) residuals)
+        vjbt = vjb.swapaxes(-1, -2)                                  # (P, K, 3, F)
+        s_jj = vjbt @ vj - n[..., None, None] * mean_j[..., :, None] * mean_j[..., None, :]
+        s_ji = vjbt @ vi[:, None] - n[..., None, None] * mean_j[..., :, None] * mean_i[..., None, :]
+        s_ii = both @ np.einsum("pfc,pfc->pf", vi, vi)[..., None] - n[..., None] * np.sum(mean_i ** 2, -1,
+                                                                                          keepdims=True)
+        B = np.linalg.solve(s_jj + ridge * _EYE3, s_ji + ridge * _EYE3)  # (P, K, 3, 3), shrunk towards I
+        rss = s_ii[..., 0] - 2.0 * np.einsum("pkab,pkab->pk", B, s_ji) + np.einsum("pkab,pkac,pkcb->pk", B, s_jj, B)
+        pair_var = np.maximum(rss, 0.0) / np.maximum(n - 3.0, 1.0) + 1e-4  # (P, K) mm^2
+        w = np.where(mj & (n >= min_frames)[..., None], 1.0 / pair_var[..., None], 0.0)  # (P, K, F)
+        total = w.sum(axis=1)                                        # (P, F)
+        # sum_k w_k ((v_j - mean_j) B_k + mean_i): one product over the K neighbours' 3 coordinates
+        wv = (vj * w[..., None]).transpose(0, 2, 1, 3).reshape(P, F, 3 * K)
+        c = mean_i - (mean_j[:, :, None] @ B)[:, :, 0]               # (P, K, 3)
+        mean = (wv @ B.reshape(P, 3 * K, 3) + w.transpose(0, 2, 1) @ c) / np.where(total > 0, total, 1.0)[..., None]
+        have = total > 0
+        est[:, lo:lo + P] = np.where(have[..., None], mean, np.nan).transpose(1, 0, 2)
+        var[:, lo:lo + P] = np.where(have, 1.0 / np.where(have, total, 1.0), np.inf).T
+    return est, var
 
 
 def conjecture_since_last_seen(motion, valid, neighbour_idx, neighbour_dist, last_motion, last_frame, history,

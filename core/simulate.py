@@ -232,7 +232,8 @@ def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_c
     """Per-frame detections of ``rig`` under gentle head motion, without rendering:
     visible markers projected into each view with Gaussian noise, in shuffled order.
     ``missing`` drops that fraction of detections; ``false_blobs`` adds that many
-    spurious blobs per true one. Returns ``(colors (N,), [FrameDetections])``."""
+    spurious blobs per true one, uniformly over the view's extent but at least 3 px from
+    the image of every marker. Returns ``(colors (N,), [FrameDetections])``."""
     rng = np.random.default_rng(seed)
     n = len(rig.points)
     colors = np.arange(n) % n_colors
@@ -240,7 +241,7 @@ def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_c
     frames = []
     w, h = rig.camera.image_size
 
-    def view(px, ids):
+    def view(px, ids, every_px):
         keep = rng.random(len(ids)) >= missing
         px, ids = px[keep], ids[keep]
         n_false = int(round(false_blobs * len(ids)))
@@ -249,8 +250,12 @@ def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_c
 
             lo, hi = px.min(axis=0), px.max(axis=0)
             extra = rng.uniform(lo, hi, (4 * n_false, 2))
-            # a spurious blob on top of a marker would merge with it in extraction: keep 3 px away
-            extra = extra[cKDTree(px).query(extra)[0] > 3.0][:n_false]
+            # a spurious blob within 3 px of a marker's image is not a false candidate: it would
+            # merge with the marker's own blob in extraction, and where that blob is missing
+            # (dropped, occluded, turned away) it sits where the marker is and, paired with the
+            # marker's image in another view, reconstructs the marker itself. So keep 3 px from
+            # the image of every marker in the view, detected or not.
+            extra = extra[cKDTree(every_px).query(extra)[0] > 3.0][:n_false]
             px = np.vstack([px, extra])
             ids = np.concatenate([ids, -np.ones(len(extra), int)])
         px = px + rng.normal(0.0, noise_px, px.shape)
@@ -271,8 +276,11 @@ def synthetic_detections(rig: FaceRig, n_frames: int, noise_px: float = 0.1, n_c
             pts, nrm = performance[0][f], performance[1][f]
         vis = visibility(rig.camera, rig.planes, pts, nrm) & ~hidden[f][None]
         ids = np.arange(n)
-        d = view(rig.camera.project(pts[vis[0]]), ids[vis[0]])
-        ms = [view(rig.camera.project(reflect_points(pts[vis[1 + k]], *rig.planes[k])), ids[vis[1 + k]])
-              for k in range(len(rig.planes))]
+        direct_px = rig.camera.project(pts)
+        d = view(direct_px[vis[0]], ids[vis[0]], direct_px)
+        ms = []
+        for k in range(len(rig.planes)):
+            mirror_px = rig.camera.project(reflect_points(pts, *rig.planes[k]))
+            ms.append(view(mirror_px[vis[1 + k]], ids[vis[1 + k]], mirror_px))
         frames.append(FrameDetections(d[0], d[1], d[2], [m[0] for m in ms], [m[1] for m in ms], [m[2] for m in ms]))
     return colors, frames

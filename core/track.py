@@ -15,7 +15,9 @@ Steps, per the procedure:
    assigned one-to-one to candidates within a gate; false tracking by the neighbour
    test (eq. 5.6-5.7); conflicts (one 2D blob claimed twice) keep the marker closest
    to its prediction;
-7. missing markers conjectured from their neighbours (eq. 5.8);
+7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
+   whole take known, again from relations to their neighbours learned over the take
+   (``core.motion.learned_conjectures``), meeting the measurements at both ends of a gap;
 8. the Kalman filters give the reported positions.
 
 Everything is vectorised over markers; the loop is over frames.
@@ -38,6 +40,7 @@ from .motion import (
     conjecture_motion,
     conjecture_since_last_seen,
     false_tracking,
+    learned_conjectures,
     neighbours,
     previous_and_next,
     rigid_fit,
@@ -244,38 +247,66 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     return result
 
 
-def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0) -> None:
-    """Conjectures inside a gap, redone from both of its ends (the take is offline, so
-    the frame where a hidden marker shows again is known). The pass's conjecture at
-    frame ``t`` is one-sided: the marker's motion at its last measurement ``a`` plus
-    its neighbours' motion since (eq. 5.8 weights). Here the same estimate is also made
-    from its next measurement ``b`` -- its motion there plus the neighbours' motion
-    from ``b`` to ``t`` -- and the two are blended linearly across the gap, so the
-    conjecture meets the measurements at both ends. Neighbours count where they are
-    measured at ``t`` and reported at ``a`` and ``b``; with none, the marker's motion is
-    interpolated between its ends. A gap still open at the end of the take keeps the
-    pass's conjecture. Updates ``points`` and ``head_frame`` in place."""
+def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_neighbours: int = 12,
+               ridge_mm2: float = 1.0, min_frames: int = 10) -> None:
+    """Conjectures redone with the whole take known (it is offline).
+
+    1. Learned neighbour relations (:func:`core.motion.learned_conjectures`, eq. 5.8
+       with each pair's relation fitted on the frames where both were measured; the
+       ``learned_neighbours`` nearest within ``radius_mm``): a marker's motion at ``t``
+       from the neighbours measured at ``t``. The prediction's error where the marker
+       is measured, at the two ends of its gap, is blended linearly across the gap and
+       taken off, so the conjecture meets the measurements at both ends (at the one end
+       of a gap still open at the end of the take).
+    2. Where no neighbour with a learned relation is measured: eq. 5.8 from both ends of
+       the gap -- the marker's motion at its last measurement ``a`` plus its neighbours'
+       motion since (eq. 5.8 weights), and the same from its next measurement ``b``,
+       blended linearly across the gap. A gap still open at the end of the take keeps
+       the pass's conjecture there.
+
+    Updates ``points`` and ``head_frame`` in place."""
     measured = result.assigned_blob >= 0
     F = measured.shape[0]
-    last, nxt = previous_and_next(measured)
-    t, i = np.nonzero(result.conjectured & (last >= 0) & (nxt < F))
-    if t.size == 0:
-        return
-    a, b = last[t, i], nxt[t, i]
     motion = result.head_frame - result.neutral[None]  # (F, N, 3), NaN where not reported
+    gaps = result.conjectured & np.isfinite(motion[..., 0])
+    rows = np.flatnonzero(gaps.any(axis=0))
+    if rows.size == 0:
+        return
     nidx, ndist = neighbours(result.neutral, radius_mm)
-    j = np.maximum(nidx[i], 0)  # (M, K)
-    ok = (nidx[i] >= 0) & measured[t[:, None], j]
-    ok &= np.isfinite(motion[a[:, None], j, 0]) & np.isfinite(motion[b[:, None], j, 0])
-    w = np.where(ok, 1.0 / (ndist[i] + kc), 0.0)
-    total = np.maximum(w.sum(axis=1), 1e-12)[:, None]
-    now = np.nan_to_num(motion[t[:, None], j])
+    est, _ = learned_conjectures(motion, measured, nidx[:, :learned_neighbours], rows, ridge_mm2, min_frames)
+    anchor = measured[:, rows] & np.isfinite(est[..., 0])
+    off = np.where(anchor[..., None], motion[:, rows] - est, 0.0)  # the relations' error where measured
+    before, after = previous_and_next(anchor)
+    cols = np.arange(rows.size)[None]
+    span = np.maximum(after - before, 1)
+    u = np.where(before < 0, 1.0, np.where(after >= F, 0.0, (np.arange(F)[:, None] - before) / span))[..., None]
+    corr = (1.0 - u) * off[np.maximum(before, 0), cols] + u * off[np.minimum(after, F - 1), cols]
+    learned = gaps[:, rows] & np.isfinite(est[..., 0])
+    tt, k = np.nonzero(learned)
+    new_motion = motion.copy()
+    new_motion[tt, rows[k]] = est[tt, k] + corr[tt, k]
 
-    def since(anchor):  # the neighbours' weighted motion from the anchor frame to t (zero with none)
-        return np.einsum("mk,mkd->md", w, now - np.nan_to_num(motion[anchor[:, None], j])) / total
+    last, nxt = previous_and_next(measured)
+    rest = gaps.copy()
+    rest[tt, rows[k]] = False
+    t, i = np.nonzero(rest & (last >= 0) & (nxt < F))
+    if t.size:
+        a, b = last[t, i], nxt[t, i]
+        j = np.maximum(nidx[i], 0)  # (M, K)
+        ok = (nidx[i] >= 0) & measured[t[:, None], j]
+        ok &= np.isfinite(motion[a[:, None], j, 0]) & np.isfinite(motion[b[:, None], j, 0])
+        w = np.where(ok, 1.0 / (ndist[i] + kc), 0.0)
+        total = np.maximum(w.sum(axis=1), 1e-12)[:, None]
+        now = np.nan_to_num(motion[t[:, None], j])
 
-    u = ((t - a) / (b - a))[:, None]
-    head = result.neutral[i] + (1.0 - u) * (motion[a, i] + since(a)) + u * (motion[b, i] + since(b))
+        def since(anchor):  # the neighbours' weighted motion from the anchor frame to t (zero with none)
+            return np.einsum("mk,mkd->md", w, now - np.nan_to_num(motion[anchor[:, None], j])) / total
+
+        s = ((t - a) / (b - a))[:, None]
+        new_motion[t, i] = (1.0 - s) * (motion[a, i] + since(a)) + s * (motion[b, i] + since(b))
+
+    t, i = np.nonzero(gaps)
+    head = result.neutral[i] + new_motion[t, i]
     result.head_frame[t, i] = head
     R = rotation_zyx(result.head_pose[t, :3])
     result.points[t, i] = np.einsum("mij,mj->mi", R, head) + result.head_pose[t, 3:]

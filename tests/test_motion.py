@@ -1,5 +1,5 @@
 """Chapter 5 tracking building blocks: rigid fit, eq. 5.4 angles, the adaptive Kalman
-filter (eq. 4.1-4.2), false-tracking detection (eq. 5.6-5.7), conjecture (eq. 5.8)."""
+filter (eq. 4.1-4.2), false-tracking detection (eq. 5.6-5.7), conjecture (eq. 5.8) and its learned form."""
 
 from __future__ import annotations
 
@@ -145,3 +145,46 @@ def test_conjecture_since_last_seen_keeps_the_markers_own_motion(face_field):
     assert err_since.max() < 0.5 and np.mean(err_since) < 0.25 * np.mean(err_plain)
     never, nfilled = conjecture_since_last_seen(given, ~missing, idx, dist, past, np.full(n, -1), history)
     assert not nfilled.any()  # never measured: left to eq. 5.8
+
+
+def test_learned_conjectures_follow_each_pairs_own_relation(face_field):
+    """A lip marker moves at half its neighbours' rate and sideways to them: eq. 5.8
+    (moves like the neighbours) is wrong by the difference, the relation learned over the
+    frames where both were measured is not. A pair with too few shared frames gives no
+    estimate; a pair whose neighbour never moved falls back on eq. 5.8's v_i = v_j."""
+    from core.motion import learned_conjectures
+
+    neutral, field = face_field
+    rng = np.random.default_rng(7)
+    F, n = 120, len(neutral)
+    level = np.sin(np.arange(F) / 9.0)[:, None, None] + 0.3 * np.cos(np.arange(F) / 4.0)[:, None, None]
+    motion = level * field[None] + rng.normal(0, 0.02, (F, n, 3))  # (F, N, 3) mm, ~0.02 mm noise
+    odd = 5
+    own_map = np.array([[0.5, 0.2, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.5]])
+    idx, dist = neighbours(neutral, 25.0)
+    motion[:, odd] = motion[:, idx[odd, 0]] @ own_map  # a relation of its own to its nearest neighbour
+    measured = np.ones((F, n), bool)
+    measured[40:90, odd] = False  # a 50-frame gap
+    est, var = learned_conjectures(motion, measured, idx[:, :12], np.array([odd]))
+    gap = np.arange(40, 90)
+    err = np.linalg.norm(est[gap, 0] - motion[gap, odd], axis=1)
+    eq58 = np.array([conjecture_motion(np.where(measured[t][:, None], motion[t], np.nan), measured[t], idx,
+                                       dist)[0][odd] for t in gap])
+    err58 = np.linalg.norm(eq58 - motion[gap, odd], axis=1)
+    assert np.max(err) < 0.15 and np.max(err58) > 1.0  # mm; motions of up to ~6 mm
+    assert np.all(np.isfinite(var[gap, 0])) and np.all(var[gap, 0] > 0)
+    # too few shared frames: no estimate
+    few = measured.copy()
+    few[5:, odd] = False
+    est_few, var_few = learned_conjectures(motion, few, idx[:, :12], np.array([odd]), min_frames=10)
+    assert np.all(np.isnan(est_few[20:, 0])) and np.all(np.isinf(var_few[20:, 0]))
+    # a neighbour that never moved tells nothing: the relation stays v_i = v_j (eq. 5.8)
+    still = motion.copy()
+    still[:60, idx[odd, 0]] = 0.0
+    still[60:, idx[odd, 0]] = 2.0
+    only_one = np.full_like(idx[:, :1], -1)
+    only_one[odd, 0] = idx[odd, 0]
+    m = np.ones((F, n), bool)
+    m[60:, odd] = False
+    est_one, _ = learned_conjectures(still, m, only_one, np.array([odd]))
+    assert np.allclose(est_one[60:, 0], 2.0 + still[:60, odd].mean(axis=0), atol=1e-9)

@@ -33,7 +33,9 @@ def test_clean_performance_is_tracked_without_identity_switches(performance):
     assert len(result.labels) > 190
     assert s["switches"] == 0
     assert s["rms"] < 0.1  # mm, markers at 600 mm
-    assert s["conj_rms"] < 1.0 and s["conj_p99"] < 2.0  # measured 0.38 and 1.48 mm
+    # measured 0.16 and 0.59 mm with the learned neighbour relations (0.38 and 1.48 mm with
+    # eq. 5.8 alone)
+    assert s["conj_rms"] < 0.3 and s["conj_p99"] < 1.0
     # markers that turn into view later are found (measured 99.8 %; 98.5 % when a late
     # marker entered at its first-seen position, expression and all, and then failed
     # the neighbour test)
@@ -58,11 +60,13 @@ def test_faults_missing_and_false_blobs(performance):
     _, frames = synthetic_detections(rig, 80, seed=2, performance=perf, noise_px=0.1, missing=0.1, false_blobs=0.2)
     result = track(frames, rig.camera, rig.planes, TrackSettings())
     s = _score(frames, perf, result)
+    # measured 1 in 13,527: a false blob 3.4 px from the image of a marker turned away
+    # from the camera, 1.8 mm from it in 3D, taken while the marker was conjectured
     assert s["switches"] <= 0.001 * s["measured"]
     assert s["rms"] < 0.2
-    # measured 98.99 % and 1.65 mm (99.2 % before late markers were held back until
-    # their first sighting, which removed a 1.9 mm switch to a false blob here)
-    assert s["reported_of_visible"] >= 0.985 and s["conj_p99"] < 2.5
+    # measured 99.05 % and 1.37 mm (98.99 % and 1.65 mm before the learned relations and
+    # before the generator kept false blobs off hidden markers' images)
+    assert s["reported_of_visible"] >= 0.985 and s["conj_p99"] < 1.8
     assert s["duplicates"] == 0
     assert result.conjectured.sum() > 0 and result.stats["false_tracking"].sum() > 0
     assert np.all(result.camera_mask[result.conjectured] == 0)
@@ -83,20 +87,23 @@ def test_stress_harness_occlusions_false_candidates(performance):
     ratio = result.stats["candidates"][1:].sum() / result.stats["measured"][1:].sum()
     assert ratio > 2.3  # measured 2.34
     assert s["rms"] < 0.2  # mm; measured 0.075
-    # measured 6 in 25,214, all to a false blob within 2 px of the hidden marker's image
-    assert s["switches"] <= 0.0005 * s["measured"]
-    assert s["reported_of_visible"] >= 0.99  # measured 99.70 %
+    # the issue's target; the 6 switches measured before were all to false blobs the
+    # generator placed within 2 px of a hidden marker's image, where they reconstruct the
+    # marker itself (core.simulate.synthetic_detections now keeps them 3 px off)
+    assert s["switches"] == 0
+    assert s["reported_of_visible"] >= 0.99  # measured 99.64 %
     assert s["duplicates"] == 0  # two chains of one late marker are one marker (were 4)
-    assert s["conj_p99"] < 2.0  # measured 1.24 mm
-    # conjectures inside a gap are blended from both of its ends (measured 0.25 mm RMS;
-    # 0.43 mm from the last sighting alone)
+    assert s["conj_p99"] < 1.2  # measured 0.90 mm (1.24 with eq. 5.8 alone)
+    # conjectures inside a gap from the learned neighbour relations, meeting both ends
+    # (measured 0.20 mm RMS; 0.25 mm with eq. 5.8 from both ends, 0.43 mm from the last
+    # sighting alone)
     measured = result.assigned_blob >= 0
     frames_i = np.arange(measured.shape[0])[:, None]
     seen_before = np.maximum.accumulate(np.where(measured, frames_i, -1), axis=0) >= 0
     seen_after = np.minimum.accumulate(np.where(measured, frames_i, 10**9)[::-1], axis=0)[::-1] < 10**9
     inside = result.conjectured & seen_before & seen_after
     err = np.linalg.norm(result.points - perf[0][:, s["ids"]], axis=2)
-    assert inside.sum() > 5000 and np.sqrt(np.mean(err[inside] ** 2)) < 0.38
+    assert inside.sum() > 5000 and np.sqrt(np.mean(err[inside] ** 2)) < 0.3
 
 
 def test_a_blank_frame_mid_clip_is_bridged(performance):
@@ -112,3 +119,28 @@ def test_a_blank_frame_mid_clip_is_bridged(performance):
     assert result.stats["measured"][40] == 0 and result.stats["measured"][41] > 0.9 * result.stats["measured"][39]
     s = _score(frames, perf, result)
     assert s["switches"] == 0 and s["rms"] < 0.1
+
+
+def test_false_blobs_keep_off_every_markers_image(performance):
+    """The generator's false blobs stay 3 px from the image of every marker in the view --
+    detected, dropped by ``missing``, occluded or turned away -- since a blob there would
+    merge with the marker's own or stand in for it exactly."""
+    from core.mirror import reflect_points
+    from core.simulate import visibility
+
+    rig, perf = performance
+    _, frames = synthetic_detections(rig, 6, seed=9, performance=perf, noise_px=0.0, missing=0.3, false_blobs=0.5,
+                                     occlusions=3, occlusion_frames=4)
+    dropped = 0
+    for t, fr in enumerate(frames):
+        vis = visibility(rig.camera, rig.planes, perf[0][t], perf[1][t])
+        views = [(fr.direct, fr.direct_id, rig.camera.project(perf[0][t]), vis[0])]
+        views += [(fr.mirror[k], fr.mirror_id[k], rig.camera.project(reflect_points(perf[0][t], *rig.planes[k])),
+                   vis[1 + k]) for k in range(len(rig.planes))]
+        for px, ids, every, seen in views:
+            false = px[ids < 0]
+            assert len(false) > 0.3 * np.sum(ids >= 0)
+            gap = np.min(np.linalg.norm(false[:, None] - every[None], axis=2), axis=1)
+            assert gap.min() > 3.0
+            dropped += int(np.sum(seen)) - int(np.sum(ids >= 0))
+    assert dropped > 0  # some markers were in view but not detected
