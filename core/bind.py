@@ -26,7 +26,7 @@ import numpy as np
 
 from .errors import InputError
 from .head import NOT_SKIN, HeadModel
-from .motion import previous_and_next
+from .motion import interpolate_in_time
 
 
 def similarity_fit(A, B):
@@ -123,22 +123,13 @@ def register_to_surface(head: HeadModel, points, exclude_groups=(), iterations: 
 def fill_gaps(points) -> np.ndarray:
     """Linear interpolation in time of NaN gaps ``(F, M, 3)``; ends hold the nearest value."""
     p = np.array(points, float)
-    F, M, _ = p.shape
     valid = np.all(np.isfinite(p), axis=2)
     if valid.all():
         return p
     if not valid.any(axis=0).all():
         bad = np.flatnonzero(~valid.any(axis=0))
         raise InputError(f"{bad.size} markers are never measured (first: index {bad[0]})")
-    t = np.arange(F)
-    prev, nxt = previous_and_next(valid)  # the previous and next valid frame per (frame, marker)
-    prev_c = np.where(prev < 0, nxt, prev)
-    nxt_c = np.where(nxt >= F, prev_c, nxt)
-    cols = np.arange(M)[None, :]
-    p0, p1 = p[prev_c, cols], p[nxt_c, cols]
-    span = np.maximum(nxt_c - prev_c, 1)
-    w = np.clip((t[:, None] - prev_c) / span, 0, 1)[..., None]
-    return np.where(valid[..., None], p, p0 + w * (p1 - p0))
+    return interpolate_in_time(p, valid)
 
 
 def _irls_rigid(ref, cur, iterations):

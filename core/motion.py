@@ -151,6 +151,24 @@ def previous_and_next(valid):
     return prev, nxt
 
 
+def interpolate_in_time(values, valid) -> np.ndarray:
+    """``values`` ``(F, M, D)`` with each item's entries outside ``valid`` ``(F, M)``
+    replaced by linear interpolation in time between the valid frames around them; before
+    an item's first and after its last valid frame its nearest valid value is held. Items
+    never valid are returned as they are."""
+    values = np.asarray(values, float)
+    F, M = np.shape(valid)
+    prev, nxt = previous_and_next(valid)
+    prev_c = np.where(prev < 0, nxt, prev)
+    nxt_c = np.where(nxt >= F, prev_c, nxt)
+    ever = prev_c < F  # items valid somewhere
+    prev_c, nxt_c = np.minimum(prev_c, F - 1), np.minimum(nxt_c, F - 1)
+    cols = np.arange(M)[None, :]
+    v0, v1 = values[prev_c, cols], values[nxt_c, cols]
+    w = np.clip((np.arange(F)[:, None] - prev_c) / np.maximum(nxt_c - prev_c, 1), 0, 1)[..., None]
+    return np.where((np.asarray(valid, bool) | ~ever)[..., None], values, v0 + w * (v1 - v0))
+
+
 # -------------------------------------------------------- neighbour statistics
 def neighbours(neutral, radius: float, max_neighbours: int = 24):
     """Markers within ``radius`` of each marker in the neutral face (itself excluded):
@@ -284,10 +302,9 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
         vjbt = vjb.swapaxes(-1, -2)                                  # (P, K, 3, F)
         s_jj = vjbt @ vj - n[..., None, None] * mean_j[..., :, None] * mean_j[..., None, :]
         s_ji = vjbt @ vi[:, None] - n[..., None, None] * mean_j[..., :, None] * mean_i[..., None, :]
-        s_ii = both @ np.einsum("pfc,pfc->pf", vi, vi)[..., None] - n[..., None] * np.sum(mean_i ** 2, -1,
-                                                                                          keepdims=True)
+        s_ii = (both @ np.einsum("pfc,pfc->pf", vi, vi)[..., None])[..., 0] - n * np.sum(mean_i ** 2, axis=-1)
         B = np.linalg.solve(s_jj + ridge * _EYE3, s_ji + ridge * _EYE3)  # (P, K, 3, 3), shrunk towards I
-        rss = s_ii[..., 0] - 2.0 * np.einsum("pkab,pkab->pk", B, s_ji) + np.einsum("pkab,pkac,pkcb->pk", B, s_jj, B)
+        rss = s_ii - 2.0 * np.einsum("pkab,pkab->pk", B, s_ji) + np.einsum("pkab,pkac,pkcb->pk", B, s_jj, B)
         pair_var = np.maximum(rss, 0.0) / np.maximum(n - 3.0, 1.0) + 1e-4  # (P, K) mm^2
         w = np.where(mj & (n >= min_frames)[..., None], 1.0 / pair_var[..., None], 0.0)  # (P, K, F)
         total = w.sum(axis=1)                                        # (P, F)

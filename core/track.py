@@ -40,6 +40,7 @@ from .motion import (
     conjecture_motion,
     conjecture_since_last_seen,
     false_tracking,
+    interpolate_in_time,
     learned_conjectures,
     neighbours,
     previous_and_next,
@@ -276,11 +277,7 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
     est, _ = learned_conjectures(motion, measured, nidx[:, :learned_neighbours], rows, ridge_mm2, min_frames)
     anchor = measured[:, rows] & np.isfinite(est[..., 0])
     off = np.where(anchor[..., None], motion[:, rows] - est, 0.0)  # the relations' error where measured
-    before, after = previous_and_next(anchor)
-    cols = np.arange(rows.size)[None]
-    span = np.maximum(after - before, 1)
-    u = np.where(before < 0, 1.0, np.where(after >= F, 0.0, (np.arange(F)[:, None] - before) / span))[..., None]
-    corr = (1.0 - u) * off[np.maximum(before, 0), cols] + u * off[np.minimum(after, F - 1), cols]
+    corr = interpolate_in_time(off, anchor)  # blended across each gap from both ends
     learned = gaps[:, rows] & np.isfinite(est[..., 0])
     tt, k = np.nonzero(learned)
     new_motion = motion.copy()
@@ -288,7 +285,7 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
 
     last, nxt = previous_and_next(measured)
     rest = gaps.copy()
-    rest[tt, rows[k]] = False
+    rest[:, rows] &= ~learned
     t, i = np.nonzero(rest & (last >= 0) & (nxt < F))
     if t.size:
         a, b = last[t, i], nxt[t, i]
