@@ -99,3 +99,69 @@ def run_tracking_benchmark(n_frames: int = 150, progress=print, repeats: int = 3
                  f"max {r['conjectured_max_mm']:.2f} mm  {r['frames_per_s']:.0f} frames/s "
                  f"(median {r['frames_per_s_median']:.0f})")
     return out
+
+
+def render_performance_mp4(path, n_frames: int, fps: float = 60.0, seed: int = 1):
+    """A 1280x720 MP4 of the benchmark performance (300 markers, 10 deg, 5 mm), rendered
+    by :func:`core.render.render_rig_frame` (2 grey levels of noise, mp4v). Returns
+    ``(rig, truth points (F, N, 3))``."""
+    import cv2
+
+    from core.markers import DEFAULT_CLASSES
+    from core.render import RenderSettings, render_rig_frame
+    from core.simulate import visibility
+
+    rig = face_rig(n_markers=300, seed=3, layout="even")
+    pts, nrm, *_ = rig_performance(rig, n_frames, head_motion_deg=10, expression_mm=5)
+    class_rgb = np.array([s[0] for s in DEFAULT_CLASSES.values()])
+    rng = np.random.default_rng(seed)
+    color = np.arange(len(rig.points)) % len(class_rgb)
+    rng.shuffle(color)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, rig.camera.image_size)
+    try:
+        for f in range(n_frames):
+            vis = visibility(rig.camera, rig.planes, pts[f], nrm[f])
+            img, _ = render_rig_frame(rig.camera, rig.planes, pts[f], color, class_rgb,
+                                      RenderSettings(noise_sigma=2.0), rng, visible=vis)
+            writer.write(img)
+    finally:
+        writer.release()
+    return rig, pts
+
+
+def run_track_command_benchmark(n_frames: int = 600, repeats: int = 3, progress=print) -> dict:
+    """The whole ``mirrorcap track`` (decode, extraction, mirror self-calibration,
+    tracking, C3D and report written) on a rendered 1280x720 MP4 of ``n_frames`` frames,
+    ``repeats`` times; speed (fastest and median) and accuracy against the truth."""
+    import tempfile
+    from pathlib import Path
+
+    from core.c3d import read_c3d
+    from core.evaluate import score_take
+    from core.take import run_track
+    from core.video import open_source
+
+    with tempfile.TemporaryDirectory() as tmp:
+        video = Path(tmp) / "performance.mp4"
+        rig, truth = render_performance_mp4(video, n_frames)
+        source = open_source(video)
+        times, reports = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            reports.append(run_track(source, rig.camera, Path(tmp) / "take.c3d", report=Path(tmp) / "take.json"))
+            times.append(time.perf_counter() - t0)
+        take = read_c3d(Path(tmp) / "take.c3d")
+        s = score_take(take["points"], truth, rig.camera, conjectured=take["conjectured"])
+    fastest = reports[int(np.argmin(times))]["timings_s"]
+    out = {"frames": n_frames, "size": list(rig.camera.image_size), "markers": s["markers_tracked"],
+           "frames_per_s": n_frames / min(times), "frames_per_s_median": n_frames / float(np.median(times)),
+           "seconds": min(times), "stages_s": {"detect": fastest["detect"], "track": fastest["track"],
+                                               "other": min(times) - fastest["detect"] - fastest["track"]},
+           "track_stages_s": fastest["track_stages"],
+           **{k: s[k] for k in ("markers_matched", "identity_switches", "measured_marker_frames", "rms_mm", "p95_mm",
+                                "max_mm", "conjectured", "conjectured_rms_mm", "conjectured_max_mm")}}
+    progress(f"  whole track, {n_frames} frames 1280x720: {out['frames_per_s']:.0f} frames/s "
+             f"(median {out['frames_per_s_median']:.0f}); detect {out['stages_s']['detect']:.2f} s, track "
+             f"{out['stages_s']['track']:.2f} s, other {out['stages_s']['other']:.2f} s; RMS {s['rms_mm']:.3f} mm, "
+             f"{s['identity_switches']} switches")
+    return out

@@ -122,16 +122,21 @@ class SelfCalibration:
 def self_calibrate_mirror(frames, camera: Camera, mirror: int, *, threshold_px: float = 1.0,
                           final_threshold_px: float = 0.5, confidence: float = 0.99, max_iterations: int = 60000,
                           max_dy_px: float | None = None, score_frames: int = 3, seed: int = 0,
-                          batch: int = 32) -> SelfCalibration:
+                          batch: int = 32, rescored: int = 4) -> SelfCalibration:
     """Estimate mirror ``mirror``'s plane from detections alone (module docstring).
 
     ``max_dy_px`` bounds the vertical offset of the candidates sampled first
     (default 5 % of the image height); ``score_frames`` frames score hypotheses,
-    all frames feed the refinement."""
+    all frames feed the refinement; of each ``batch`` of hypotheses the ``rescored``
+    best on the first frame are scored on all of them."""
     f = camera.focal_px
     cand_all = build_candidates(frames, camera, mirror)
     scoring = cand_all if score_frames >= len(frames) else _subset(cand_all, cand_all.frame < score_frames)
     scorer = _Scorer(scoring, threshold_px / f)
+    # preemptive scoring: every hypothesis is scored on the first frame alone, and only
+    # the best ``rescored`` of each batch on all ``score_frames`` frames
+    first = _subset(scoring, scoring.frame == scoring.frame.min()) if len(scoring.frame) else scoring
+    quick = _Scorer(first, threshold_px / f) if 0 < len(first.frame) < len(scoring.frame) else None
     h = camera.image_size[1] or 720
     max_dy = 0.05 * h if max_dy_px is None else max_dy_px
     pools = [np.flatnonzero(np.abs(scoring.dy_px) <= max_dy), np.arange(len(scoring.dy_px))]
@@ -156,6 +161,8 @@ def self_calibrate_mirror(frames, camera: Camera, mirror: int, *, threshold_px: 
             if not keep.any():
                 continue
             u = orient_normal(cand[keep] / norm[keep, None])
+            if quick is not None and len(u) > rescored:
+                u = u[np.argsort(quick.cost(u)[0], kind="stable")[:rescored]]
             cost, inl = scorer.cost(u)
             k = int(np.argmin(cost))
             if cost[k] < best_cost:

@@ -422,11 +422,11 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     # Markers that will not earn their place (wrong pairings, lost for good) do not count.
     member = np.flatnonzero(np.isin(comp, good))
     real = _earns_place(first_pass.assigned_blob >= 0, s.min_measured_frames, s.min_measured_fraction)
-    gap_mm = np.nan_to_num(first_pass.head_frame[f[member]][:, real], nan=1e9) - head[member, None]  # (M, N, 3)
-    d = np.sqrt(np.einsum("mnd,mnd->mn", gap_mm, gap_mm).min(axis=1, initial=np.inf))
-    seen = np.nan_to_num(first_pass.points[f[member]][:, real], nan=1e9)
-    ray = seen[..., :2] / np.maximum(seen[..., 2:], 1e-9) - det.norm[0][cands.direct[idx[member]]][:, None]
-    d_px = np.sqrt(np.einsum("mnd,mnd->mn", ray, ray).min(axis=1, initial=np.inf)) * focal_px
+    d = _nearest_same_frame(first_pass.head_frame[:, real], f[member], head[member], same_marker_mm)
+    seen = first_pass.points[:, real]
+    rays = seen[..., :2] / np.where(seen[..., 2:] > 1e-9, seen[..., 2:], np.nan)
+    d_px = _nearest_same_frame(rays, f[member], det.norm[0][cands.direct[idx[member]]],
+                               same_ray_px / focal_px) * focal_px
     near_existing = np.bincount(comp[member], (d <= same_marker_mm) | (d_px <= same_ray_px), minlength=n_comp)
     good = good[near_existing[good] < 0.5 * np.bincount(comp[member], minlength=n_comp)[good]]
     if good.size == 0:
@@ -470,6 +470,24 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
         return markers
     return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
             np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
+
+
+def _nearest_same_frame(tracked, frame, query, within: float) -> np.ndarray:
+    """Distance from each ``query`` point ``(M, D)`` to the nearest of the ``tracked``
+    points ``(F, N, D)`` (NaN: not tracked) of its own ``frame`` ``(M,)``; ``inf`` where
+    none lies within ``within``. One KD-tree over every frame, the frame number as an
+    extra coordinate far larger than any distance asked for."""
+    from scipy.spatial import cKDTree
+
+    F, N, D = tracked.shape
+    ok = np.isfinite(tracked).all(axis=2)
+    if not ok.any() or len(query) == 0:
+        return np.full(len(query), np.inf)
+    spacing = 10.0 * (np.abs(tracked[ok]).max() + np.abs(query).max() + within + 1.0)
+    frames = np.broadcast_to(np.arange(F)[:, None], (F, N))
+    tree = cKDTree(np.c_[tracked[ok], frames[ok] * spacing])
+    dist, _ = tree.query(np.c_[query, frame * spacing], distance_upper_bound=within * (1 + 1e-9) + 1e-12)
+    return dist
 
 
 def _motion_near(first_pass, real, where, frame, radius_mm: float, kc: float = 1.0):
