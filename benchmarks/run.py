@@ -129,13 +129,14 @@ def _extraction_summary(ext) -> list:
 def _tracking_summary(trk) -> list:
     lines = ["## Tracking from detections (300 markers, 150 frames unless stated, 10 deg head turn, 5 mm expressions)",
              "", "| scenario | markers | RMS | identity switches | reported of visible | conjectured RMS / p99 / max "
-             "| candidates per marker | frames/s fastest / median |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "| conjectured / withheld | candidates per marker | frames/s fastest / median |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     cmd = trk.get("_command")
     trk = {k: v for k, v in trk.items() if k != "_command"}
     for name, r in trk.items():
         lines.append(f"| {name} | {r['markers']} | {r['rms_mm']:.3f} mm | {r['identity_switches']} of "
                      f"{r['measured']} | {r['reported_of_visible'] * 100:.1f} % | {r['conjectured_rms_mm']:.2f} / "
                      f"{r['conjectured_p99_mm']:.2f} / {r['conjectured_max_mm']:.2f} mm | "
+                     f"{r.get('conjectured', '-')} / {r.get('withheld', '-')} | "
                      f"{r['candidates_per_measured']:.2f} | {r['frames_per_s']:.0f} / "
                      f"{r.get('frames_per_s_median', r['frames_per_s']):.0f} |")
     stages = [(name, r["stages_ms"]) for name, r in trk.items() if "stages_ms" in r]

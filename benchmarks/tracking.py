@@ -63,6 +63,8 @@ def score(frames, perf, result) -> dict:
             "conjectured_rms_mm": float(np.sqrt(np.mean(ce ** 2))) if ce.size else 0.0,
             "conjectured_p99_mm": float(np.percentile(ce, 99)) if ce.size else 0.0,
             "conjectured_max_mm": float(ce.max()) if ce.size else 0.0,
+            "conjectured": int(result.conjectured.sum()),
+            "withheld": int(np.sum(result.stats.get("withheld", 0))),
             "candidates_per_measured": float(result.stats["candidates"][1:].sum() /
                                              max(result.stats["measured"][1:].sum(), 1))}
 
@@ -157,7 +159,7 @@ def run_track_command_benchmark(n_frames: int = 600, repeats: int = 3, progress=
            "frames_per_s": n_frames / min(times), "frames_per_s_median": n_frames / float(np.median(times)),
            "seconds": min(times), "stages_s": {"detect": fastest["detect"], "track": fastest["track"],
                                                "other": min(times) - fastest["detect"] - fastest["track"]},
-           "track_stages_s": fastest["track_stages"],
+           "track_stages_s": fastest["track_stages"], "withheld": int(sum(reports[-1]["per_frame"]["withheld"])),
            **{k: s[k] for k in ("markers_matched", "identity_switches", "measured_marker_frames", "rms_mm", "p95_mm",
                                 "max_mm", "conjectured", "conjectured_rms_mm", "conjectured_max_mm")}}
     progress(f"  whole track, {n_frames} frames 1280x720: {out['frames_per_s']:.0f} frames/s "

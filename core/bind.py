@@ -11,6 +11,11 @@
    ``m000``.. of a fully automatic take -- the markers register to the head's skin
    surface by similarity ICP (:func:`register_to_surface`), started from a frontal
    face (the head model is authored facing the camera, as the subject in the rig).
+   Gaps (NaN: a marker the tracker did not measure, nor conjecture with confidence) are
+   filled in time first (for the head motion), then in the head frame from the
+   neighbours' motion through relations learned over the take
+   (:func:`core.motion.conjecture_gaps`, eq. 5.8 per pair), where a related neighbour is
+   measured: the face needs every marker every frame.
 3. Every other marker binds to its nearest head vertex on the skin (not eyeballs,
    teeth or the inner lip), one marker per vertex (linear assignment).
 
@@ -26,7 +31,10 @@ import numpy as np
 
 from .errors import InputError
 from .head import NOT_SKIN, HeadModel
-from .motion import interpolate_in_time
+from .motion import conjecture_gaps, interpolate_in_time, neighbours
+
+GAP_NEIGHBOUR_RADIUS = 25.0  # take units (mm): neighbours whose learned relations fill a gap
+GAP_NEIGHBOURS = 12
 
 
 def similarity_fit(A, B):
@@ -244,6 +252,10 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         t = hp[:, :, 3] - np.einsum("fij,j->fi", R, tn)
     # undo the head motion: q = R^T (p - t), in the neutral frame's pose
     q = np.einsum("fji,fmj->fmi", R, p - t[:, None, :])
+    if filled.any():  # gaps follow the neighbours that moved like the marker (time interpolation where none can)
+        nidx, _ = neighbours(q[neutral_frame], GAP_NEIGHBOUR_RADIUS)
+        motion, _ = conjecture_gaps(q - q[neutral_frame], valid, filled, nidx[:, :GAP_NEIGHBOURS])
+        q = np.where(np.isfinite(motion[..., :1]), q[neutral_frame] + motion, q)
     if len(pairs) >= 3:
         idx = np.array([i for i, _ in pairs])
         target = head.vertices[[lms[n] for _, n in pairs]]

@@ -131,6 +131,7 @@ def _cmd_track(args) -> int:
     from .camera import Camera
     from .markers import ColorClasses, load_rig_views
     from .take import run_track
+    from .track import TrackSettings
 
     camera = Camera.load(args.camera)
     colors = ColorClasses.load(args.colors) if args.colors else None
@@ -145,16 +146,20 @@ def _cmd_track(args) -> int:
             raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
     if not args.face_distance > 0:
         raise MirrorCapError("--face-distance must be a positive number of millimetres")
+    if not args.conjecture_limit >= 0:
+        raise MirrorCapError("--conjecture-limit must be a number of millimetres, 0 or more (or inf)")
+    settings = TrackSettings(conjecture_max_sd_mm=args.conjecture_limit / 3.0)
     source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
                        colors=colors, layout=layout, mirrors=mirrors, known_length=known, start=start, end=end,
-                       step=args.step, face_distance_mm=args.face_distance)
+                       step=args.step, face_distance_mm=args.face_distance, settings=settings)
     if not args.quiet:
         pf = report["per_frame"]
         n = report["frames"]["count"]
         print(f"{report['markers']['count']} markers over {n} frames -> {args.output} [{report['units']}]")
         print(f"  per frame: {np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured, "
-              f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts; "
+              f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts, "
+              f"{np.mean(pf['withheld']):.1f} conjectures withheld; "
               f"tracking {report['timings_s']['tracking_frames_per_s']:.0f} frames/s")
     return 0
 
@@ -282,6 +287,9 @@ def build_parser(extra_commands=None) -> argparse.ArgumentParser:
     trk.add_argument("--face-distance", type=float, default=600.0, metavar="MM",
                      help="without --mirrors: the face's distance from the camera that sets the take's scale "
                           "(default 600; --known-length makes the scale exact)")
+    trk.add_argument("--conjecture-limit", type=float, default=2.0, metavar="MM",
+                     help="report a hidden marker's conjectured position only where its expected error (3 sigma) "
+                          "is within MM; the rest stay gaps (default 2; 'inf' keeps every conjecture, 0 none)")
     trk.add_argument("--colors", help="COLORS.json colour classes")
     trk.add_argument("--rig", help="RIG.json view rectangles")
     trk.set_defaults(func=_cmd_track)

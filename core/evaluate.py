@@ -7,8 +7,9 @@ scale, so identities are found in the image:
 1. each tracked marker's true identity is the majority, over the frames where it was
    measured, of the true marker whose projection is nearest to its own (within
    ``match_px``);
-2. an identity switch is a measured marker-frame whose nearest true marker (within
-   ``match_px``) is another one, or none;
+2. an identity switch is a measured marker-frame whose nearest true marker is another
+   one (``off_marker`` counts those nearest their own true marker but more than
+   ``match_px`` from it: the right marker, measured badly -- an error, not a switch);
 3. one similarity transform (Umeyama), fitted over every measured marker-frame of the
    clip, brings the take onto the truth; the 3D error is what remains, in truth units (mm).
    Conjectured points are scored separately under the same transform.
@@ -37,20 +38,23 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
     conj = np.zeros((F, M), bool) if conjectured is None else np.asarray(conjectured, bool)
     reported = np.all(np.isfinite(P), axis=2)
     measured = reported & ~conj
-    nearest = np.full((F, M), -1)
+    nearest = np.full((F, M), -1)  # nearest true marker, at any distance
+    near_px = np.full((F, M), np.inf)
     for f in range(F):
         idx = np.flatnonzero(reported[f])
-        if idx.size == 0:
+        seen = np.flatnonzero(np.all(np.isfinite(T[f]), axis=1))
+        if idx.size == 0 or seen.size == 0:
             continue
-        d, j = cKDTree(camera.project(T[f])).query(camera.project(P[f, idx]))
-        nearest[f, idx] = np.where(d <= match_px, j, -1)
+        d, j = cKDTree(camera.project(T[f, seen])).query(camera.project(P[f, idx]))
+        nearest[f, idx], near_px[f, idx] = seen[j], d
     ids = np.full(M, -1)
     for m in range(M):
-        v = nearest[measured[:, m], m]
-        v = v[v >= 0]
+        v = nearest[measured[:, m] & (near_px[:, m] <= match_px), m]
         if v.size:
             ids[m] = np.bincount(v).argmax()
-    switches = int(np.count_nonzero(measured & (nearest != ids[None, :])))
+    switches = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest != ids[None, :])))
+    off_marker = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest == ids[None, :])
+                                      & (near_px > match_px)))
     ok = measured & (ids[None, :] >= 0)
     if ok.sum() < 3:
         raise InputError("fewer than 3 tracked points match the truth: nothing to score")
@@ -63,7 +67,7 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
     ce = err[cj]
     return {
         "markers_tracked": M, "markers_true": int(T.shape[1]), "markers_matched": int(np.count_nonzero(ids >= 0)),
-        "identity_switches": switches, "measured_marker_frames": int(measured.sum()),
+        "identity_switches": switches, "off_marker": off_marker, "measured_marker_frames": int(measured.sum()),
         "reported_fraction": float(reported.mean()),
         "rms_mm": float(np.sqrt(np.mean(e ** 2))), "p95_mm": float(np.percentile(e, 95)), "max_mm": float(e.max()),
         "conjectured": int(cj.sum()),

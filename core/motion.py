@@ -306,7 +306,12 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
         B = np.linalg.solve(s_jj + ridge * _EYE3, s_ji + ridge * _EYE3)  # (P, K, 3, 3), shrunk towards I
         rss = s_ii - 2.0 * np.einsum("pkab,pkab->pk", B, s_ji) + np.einsum("pkab,pkac,pkcb->pk", B, s_jj, B)
         pair_var = np.maximum(rss, 0.0) / np.maximum(n - 3.0, 1.0) + 1e-4  # (P, K) mm^2
-        w = np.where(mj & (n >= min_frames)[..., None], 1.0 / pair_var[..., None], 0.0)  # (P, K, F)
+        # a relation's prediction variance grows where the neighbour moves outside what the fit
+        # saw (the leverage of regression: d' S^-1 d, d the neighbour's motion off its mean)
+        dj = vj - mean_j[:, :, None]                                 # (P, K, F, 3)
+        lev = np.einsum("pkfa,pkab,pkfb->pkf", dj, np.linalg.inv(s_jj + ridge * _EYE3), dj)
+        pred_var = pair_var[..., None] * (1.0 + 1.0 / nn + lev)      # (P, K, F)
+        w = np.where(mj & (n >= min_frames)[..., None], 1.0 / pred_var, 0.0)  # (P, K, F)
         total = w.sum(axis=1)                                        # (P, F)
         # sum_k w_k ((v_j - mean_j) B_k + mean_i): one product over the K neighbours' 3 coordinates
         wv = (vj * w[..., None]).transpose(0, 2, 1, 3).reshape(P, F, 3 * K)
@@ -316,6 +321,32 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
         est[:, lo:lo + P] = np.where(have[..., None], mean, np.nan).transpose(1, 0, 2)
         var[:, lo:lo + P] = np.where(have, 1.0 / np.where(have, total, 1.0), np.inf).T
     return est, var
+
+
+def conjecture_gaps(motion, measured, gaps, neighbour_idx, ridge: float = 1.0, min_frames: int = 10):
+    """Motions of the ``gaps`` cells ``(F, N)`` from the learned neighbour relations
+    (:func:`learned_conjectures`), corrected to meet the measurements at the ends of each
+    gap: the relations' error where the marker is ``measured`` is blended linearly in
+    time across the gap (held at an open end) and taken off. Returns ``(motion (F, N, 3),
+    sd (F, N))`` -- NaN where the cell is no gap or no related neighbour is measured;
+    ``sd`` is the standard deviation of the relations' estimate (mm)."""
+    measured = np.asarray(measured, bool)
+    gaps = np.asarray(gaps, bool)
+    F, N = gaps.shape
+    out = np.full((F, N, 3), np.nan)
+    sd = np.full((F, N), np.nan)
+    rows = np.flatnonzero(gaps.any(axis=0))
+    if rows.size == 0:
+        return out, sd
+    motion = np.asarray(motion, float)
+    est, var = learned_conjectures(motion, measured, neighbour_idx, rows, ridge, min_frames)
+    anchor = measured[:, rows] & np.isfinite(est[..., 0])
+    off = np.where(anchor[..., None], motion[:, rows] - est, 0.0)  # the relations' error where measured
+    corr = interpolate_in_time(off, anchor)  # blended across each gap from both ends
+    learned = gaps[:, rows] & np.isfinite(est[..., 0])
+    out[:, rows] = np.where(learned[..., None], est + corr, np.nan)
+    sd[:, rows] = np.where(learned, np.sqrt(var), np.nan)
+    return out, sd
 
 
 def conjecture_since_last_seen(motion, valid, neighbour_idx, neighbour_dist, last_motion, last_frame, history,

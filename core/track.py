@@ -37,11 +37,10 @@ from .mirror import MirrorPlane, points_from_planes
 from .motion import (
     ConstantVelocityKalman,
     angles_zyx,
+    conjecture_gaps,
     conjecture_motion,
     conjecture_since_last_seen,
     false_tracking,
-    interpolate_in_time,
-    learned_conjectures,
     neighbours,
     previous_and_next,
     rigid_fit,
@@ -64,6 +63,9 @@ class TrackSettings:
     pose_accel_sigma: tuple = (0.01, 1.0)  # rotation (rad) and translation (mm) per frame
     pose_measure_sigma: tuple = (0.0005, 0.05)
     depth_margin_mm: float = 200.0  # candidates deeper/shallower than the neutral face +- this are dropped
+    conjecture_max_sd_mm: float = 2.0 / 3.0  # a conjecture expected off by more (1 sigma) is left a gap
+    reacquire_mm: float = 3.0  # a marker back after a gap takes only a candidate with a like one this near
+    # in the frame before or after (a marker's image lasts; a stray blob paired by chance seldom does)
     rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
     min_measured_frames: int = 5  # a marker measured in fewer frames is not reported
     min_measured_fraction: float = 0.25  # ... nor one this rarely measured that is lost for good (see _keep_measured)
@@ -242,14 +244,14 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
     result = _keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     lap("final_pass")
-    _fill_gaps(result, s.neighbour_radius_mm)
+    _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     lap("gap_fill")
     result.timings = timings
     return result
 
 
 def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_neighbours: int = 12,
-               ridge_mm2: float = 1.0, min_frames: int = 10) -> None:
+               ridge_mm2: float = 1.0, min_frames: int = 10, max_sd_mm: float = np.inf) -> None:
     """Conjectures redone with the whole take known (it is offline).
 
     1. Learned neighbour relations (:func:`core.motion.learned_conjectures`, eq. 5.8
@@ -264,28 +266,29 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
        motion since (eq. 5.8 weights), and the same from its next measurement ``b``,
        blended linearly across the gap. A gap still open at the end of the take keeps
        the pass's conjecture there.
+    3. Each conjecture's expected error: the standard deviation of its learned estimate
+       (the relations' residuals) grown as a random walk with the frames to the nearest
+       measurement of the marker, ``sd * sqrt(frames)`` (cells of step 2: the take's
+       median ``sd``). A conjecture expected to be off by more than ``max_sd_mm`` is
+       withheld: the marker is left as a gap there (``stats["withheld"]`` per frame).
 
-    Updates ``points`` and ``head_frame`` in place."""
+    Updates ``points``, ``head_frame`` and ``conjectured`` in place."""
     measured = result.assigned_blob >= 0
     F = measured.shape[0]
     motion = result.head_frame - result.neutral[None]  # (F, N, 3), NaN where not reported
     gaps = result.conjectured & np.isfinite(motion[..., 0])
     rows = np.flatnonzero(gaps.any(axis=0))
+    result.stats["withheld"] = np.zeros(F, int)
+    result.stats["conjectured"] = result.conjectured.sum(axis=1)
     if rows.size == 0:
         return
     nidx, ndist = neighbours(result.neutral, radius_mm)
-    est, _ = learned_conjectures(motion, measured, nidx[:, :learned_neighbours], rows, ridge_mm2, min_frames)
-    anchor = measured[:, rows] & np.isfinite(est[..., 0])
-    off = np.where(anchor[..., None], motion[:, rows] - est, 0.0)  # the relations' error where measured
-    corr = interpolate_in_time(off, anchor)  # blended across each gap from both ends
-    learned = gaps[:, rows] & np.isfinite(est[..., 0])
-    tt, k = np.nonzero(learned)
-    new_motion = motion.copy()
-    new_motion[tt, rows[k]] = est[tt, k] + corr[tt, k]
+    learned_motion, sd = conjecture_gaps(motion, measured, gaps, nidx[:, :learned_neighbours], ridge_mm2, min_frames)
+    learned = np.isfinite(sd)
+    new_motion = np.where(learned[..., None], learned_motion, motion)
 
     last, nxt = previous_and_next(measured)
-    rest = gaps.copy()
-    rest[:, rows] &= ~learned
+    rest = gaps & ~learned
     t, i = np.nonzero(rest & (last >= 0) & (nxt < F))
     if t.size:
         a, b = last[t, i], nxt[t, i]
@@ -307,6 +310,18 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
     result.head_frame[t, i] = head
     R = rotation_zyx(result.head_pose[t, :3])
     result.points[t, i] = np.einsum("mij,mj->mi", R, head) + result.head_pose[t, 3:]
+
+    if np.isfinite(max_sd_mm):
+        typical = np.nanmedian(sd[gaps]) if np.isfinite(sd[gaps]).any() else 0.2
+        frames_off = np.minimum(np.where(last >= 0, np.arange(F)[:, None] - last, F),
+                                np.where(nxt < F, nxt - np.arange(F)[:, None], F))
+        expected = np.where(np.isnan(sd), typical, sd) * np.sqrt(np.maximum(frames_off, 1))
+        withheld = gaps & (expected > max_sd_mm)
+        result.points[withheld] = np.nan
+        result.head_frame[withheld] = np.nan
+        result.conjectured[withheld] = False
+        result.stats["withheld"] = withheld.sum(axis=1)
+    result.stats["conjectured"] = result.conjectured.sum(axis=1)
 
 
 def _earns_place(measured, min_frames: int, min_fraction: float) -> np.ndarray:
@@ -563,6 +578,16 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
     K = cands.mirror_blob.shape[1]
     keys = [cands.direct] + [cands.mirror_blob[:, k] for k in range(K)]
     view_bit = (2 ** np.arange(1, K + 1))[None, :]
+    trees = {}
+
+    def tree(u):
+        """Frame ``u``'s candidates as a KD-tree (None: none), built once and kept while in use."""
+        if u not in trees:
+            su = cands.at(u)
+            trees[u] = cKDTree(cand_key[su]) if su.stop > su.start else None
+            trees.pop(u - 5, None)
+        return trees[u]
+
     for t in range(F):
         sl = cands.at(t)
         counts["candidates"][t] = sl.stop - sl.start
@@ -573,9 +598,18 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
         # predictions are good (fewer chance candidates), wide where the face moves fast
         gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
         if sl.stop > sl.start:
-            near, j = cKDTree(cand_key[sl]).query(query, distance_upper_bound=s.gate_mm)
+            near, j = tree(t).query(query, distance_upper_bound=s.gate_mm)
             valid = (near <= gate_i) & (entry <= t)  # a late marker is measured from its first sighting on
             a = np.where(valid, j + sl.start, -1)
+            back = np.flatnonzero(valid & (last_frame < t - 1)) if t > 0 else np.zeros(0, int)
+            if back.size:  # coming back after a gap: only to a candidate that lasts
+                lasts = np.zeros(back.size, bool)
+                for u in (t - 1, t + 1, t - 2, t + 2):
+                    if 0 <= u < F and tree(u) is not None and not lasts.all():
+                        r = s.reacquire_mm * abs(u - t)
+                        lasts |= tree(u).query(cand_key[a[back]], distance_upper_bound=r)[0] <= r
+                valid[back[~lasts]] = False
+                a = np.where(valid, a, -1)
             lost = _resolve_conflicts(a, near, keys)
             counts["conflicts"][t] = lost.sum()
             valid &= ~lost

@@ -191,7 +191,9 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
 
     summary = {
         "clip": {"frames": int(source.frame_count), "fps": fps, "size": list(source.size)},
-        "tracking": {k: v for k, v in score.items() if k not in ("ids", "aligned", "error_mm")},
+        "tracking": {**{k: v for k, v in score.items() if k not in ("ids", "aligned", "error_mm")},
+                     "withheld": int(sum(report["per_frame"].get("withheld", []))),
+                     "withheld_fraction": float(sum(report["per_frame"].get("withheld", [])) / max(score["aligned"].shape[0] * score["aligned"].shape[1], 1))},
         "tracking_report": {"units": report["units"], "mirrors": report["mirrors"],
                             "tracking_frames_per_s": report["timings_s"]["tracking_frames_per_s"]},
         "fit": {"residual_to_scan_rms_mm": fit.residual_rms_mm, "landmark_rms_mm": fit.landmark_rms_mm,
@@ -248,8 +250,11 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
         ("3D error p95 / max", f"{score['p95_mm']:.3f} / {score['max_mm']:.3f} mm"),
         ("markers tracked / matched to truth / in the clip", f"{score['markers_tracked']} / "
                                                            f"{score['markers_matched']} / {score['markers_true']}"),
-        ("identity switches", score["identity_switches"]),
-        ("conjectured points (RMS error)", f"{score['conjectured']} ({score['conjectured_rms_mm']:.2f} mm)"),
+        ("identity switches (measurements nearer another true marker)", score["identity_switches"]),
+        ("measurements of the right marker more than 2 px off", score["off_marker"]),
+        ("conjectured points (RMS / max error)", f"{score['conjectured']} ({score['conjectured_rms_mm']:.2f} / "
+                                                  f"{score['conjectured_max_mm']:.2f} mm)"),
+        ("conjectures withheld (expected error over the limit: left as gaps)", sum(report["per_frame"]["withheld"])),
         ("head fit: residual to the scan / error to the true face",
          f"{fit.residual_rms_mm:.2f} / {summary['fit']['error_to_true_face_rms_mm']:.2f} mm RMS"),
         ("bind: registration residual", f"{binding.landmark_rms_mm:.2f} mm ({binding.registration})"),
@@ -272,7 +277,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     say("MirrorCap demo: rig clip -> 3D take -> fitted head -> baked shape keys")
     say(f"  tracking    {score['markers_tracked']} markers x {len(frames)} frames, 3D RMS error {score['rms_mm']:.3f} mm "
         f"(p95 {score['p95_mm']:.3f}, max {score['max_mm']:.3f}) after one similarity; "
-        f"{score['identity_switches']} identity switches")
+        f"{score['identity_switches']} identity switches, {score['off_marker']} measurements > 2 px off their marker")
     say(f"  mirrors     self-calibrated from the markers; normals within "
         f"{max(np.degrees(np.arccos(min(1.0, abs(float(np.dot(m['normal'], tn)))))) for m, tn in zip(report['mirrors'], truth['mirror_normals'])):.3f} deg of the truth")
     say(f"  head fit    {fit.residual_rms_mm:.2f} mm RMS to the scan, {summary['fit']['error_to_true_face_rms_mm']:.2f} mm "

@@ -36,7 +36,11 @@ def test_demo_tracks_fits_binds_and_bakes_the_sample_accurately(demo):
     assert trk["markers_tracked"] >= 115 and trk["markers_matched"] == trk["markers_tracked"]
     assert trk["rms_mm"] < 0.3                       # 0.12 mm measured; a wrong scale or pairing gives mm
     assert trk["max_mm"] < 3.0
-    assert trk["reported_fraction"] > 0.98
+    assert trk["identity_switches"] == 0             # 6 measurements of one grazing marker are > 2 px off: not switches
+    # every marker-frame is measured, conjectured, or a conjecture withheld as a gap because its
+    # expected error (3 sigma) passes 2 mm (the take then meets the 2 mm for conjectures)
+    assert trk["reported_fraction"] + trk["withheld_fraction"] > 0.98
+    assert trk["conjectured_max_mm"] < 2.0 and trk["withheld_fraction"] < 0.06
     assert abs(trk["scale_to_mm"] - 1.0) < 0.1       # the face-distance prior puts the take near mm
     assert d["fit"]["residual_to_scan_rms_mm"] < 0.3 and d["fit"]["error_to_true_face_rms_mm"] < 1.5
     assert d["bind"]["registration"] == "surface" and d["bind"]["surface_rms_mm"] < 0.5

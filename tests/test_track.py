@@ -15,7 +15,7 @@ def _score(frames, perf, result):
     """The benchmark's scoring (benchmarks/tracking.py), under the tests' short names."""
     r = score(frames, perf, result)
     return {"ids": r["ids"], "switches": r["identity_switches"], "measured": r["measured"], "rms": r["rms_mm"],
-            "conj_rms": r["conjectured_rms_mm"], "conj_p99": r["conjectured_p99_mm"],
+            "conj_rms": r["conjectured_rms_mm"], "conj_p99": r["conjectured_p99_mm"], "conj_max": r["conjectured_max_mm"],
             "reported_of_visible": r["reported_of_visible"], "duplicates": r["duplicates"]}
 
 
@@ -36,6 +36,7 @@ def test_clean_performance_is_tracked_without_identity_switches(performance):
     # measured 0.16 and 0.59 mm with the learned neighbour relations (0.38 and 1.48 mm with
     # eq. 5.8 alone)
     assert s["conj_rms"] < 0.3 and s["conj_p99"] < 1.0
+    assert s["conj_max"] < 2.0  # the issue's target; measured 1.48 mm
     # markers that turn into view later are found (measured 99.8 %; 98.5 % when a late
     # marker entered at its first-seen position, expression and all, and then failed
     # the neighbour test)
@@ -60,13 +61,14 @@ def test_faults_missing_and_false_blobs(performance):
     _, frames = synthetic_detections(rig, 80, seed=2, performance=perf, noise_px=0.1, missing=0.1, false_blobs=0.2)
     result = track(frames, rig.camera, rig.planes, TrackSettings())
     s = _score(frames, perf, result)
-    # measured 1 in 13,527: a false blob 3.4 px from the image of a marker turned away
-    # from the camera, 1.8 mm from it in 3D, taken while the marker was conjectured
-    assert s["switches"] <= 0.001 * s["measured"]
+    # the 1 switch measured before (a one-frame false blob 3.4 px from the image of a marker
+    # turned away, taken as the marker came back from a gap) is gone: a marker back from a
+    # gap takes only a candidate that lasts (a like one within 3 mm a frame or two away)
+    assert s["switches"] == 0
     assert s["rms"] < 0.2
-    # measured 99.05 % and 1.37 mm (98.99 % and 1.65 mm before the learned relations and
-    # before the generator kept false blobs off hidden markers' images)
-    assert s["reported_of_visible"] >= 0.985 and s["conj_p99"] < 1.8
+    # measured 99.05 % and p99 / max 0.37 / 1.70 mm (0.83 / 2.63 mm with every conjecture
+    # kept, core.track.TrackSettings.conjecture_max_sd_mm = inf)
+    assert s["reported_of_visible"] >= 0.985 and s["conj_p99"] < 0.8 and s["conj_max"] < 2.0
     assert s["duplicates"] == 0
     assert result.conjectured.sum() > 0 and result.stats["false_tracking"].sum() > 0
     assert np.all(result.camera_mask[result.conjectured] == 0)
@@ -93,7 +95,9 @@ def test_stress_harness_occlusions_false_candidates(performance):
     assert s["switches"] == 0
     assert s["reported_of_visible"] >= 0.99  # measured 99.64 %
     assert s["duplicates"] == 0  # two chains of one late marker are one marker (were 4)
-    assert s["conj_p99"] < 1.2  # measured 0.90 mm (1.24 with eq. 5.8 alone)
+    # measured p99 / max 0.41 / 1.17 mm (0.90 / 3.27 with every conjecture kept; p99 1.24
+    # with eq. 5.8 alone)
+    assert s["conj_p99"] < 0.8 and s["conj_max"] < 2.0
     # conjectures inside a gap from the learned neighbour relations, meeting both ends
     # (measured 0.20 mm RMS; 0.25 mm with eq. 5.8 from both ends, 0.43 mm from the last
     # sighting alone)
@@ -103,7 +107,31 @@ def test_stress_harness_occlusions_false_candidates(performance):
     seen_after = np.minimum.accumulate(np.where(measured, frames_i, 10**9)[::-1], axis=0)[::-1] < 10**9
     inside = result.conjectured & seen_before & seen_after
     err = np.linalg.norm(result.points - perf[0][:, s["ids"]], axis=2)
-    assert inside.sum() > 5000 and np.sqrt(np.mean(err[inside] ** 2)) < 0.3
+    assert inside.sum() > 5000 and np.sqrt(np.mean(err[inside] ** 2)) < 0.2  # measured 6,755 and 0.12 mm
+
+
+def test_conjectures_expected_off_by_more_than_the_limit_are_left_as_gaps(performance):
+    """A conjecture is reported only where its expected error -- the learned relations'
+    standard deviation grown with the frames to the marker's nearest measurement -- is
+    within ``conjecture_max_sd_mm`` (2/3 mm: 3 sigma within the issue's 2 mm); the rest
+    are gaps, counted per frame in ``stats["withheld"]``."""
+    rig, perf = performance
+    _, frames = synthetic_detections(rig, 80, seed=2, performance=perf, noise_px=0.1, missing=0.1, false_blobs=0.2)
+    kept = track(frames, rig.camera, rig.planes, TrackSettings(conjecture_max_sd_mm=np.inf))
+    limited = track(frames, rig.camera, rig.planes, TrackSettings())
+    s_all, s_lim = _score(frames, perf, kept), _score(frames, perf, limited)
+    assert kept.stats["withheld"].sum() == 0
+    gone = kept.conjectured & ~limited.conjectured
+    assert gone.sum() == limited.stats["withheld"].sum() > 0  # measured 142 of 4,114
+    assert gone.sum() < 0.1 * kept.conjectured.sum()
+    assert not (limited.conjectured & ~kept.conjectured).any()
+    assert np.isnan(limited.points[gone]).all() and (limited.assigned_blob[gone] < 0).all()
+    assert (limited.stats["conjectured"] == limited.conjectured.sum(axis=1)).all()
+    measured = kept.assigned_blob >= 0
+    assert np.array_equal(measured, limited.assigned_blob >= 0)  # measurements are untouched
+    assert np.allclose(kept.points[measured], limited.points[measured])
+    # the withheld ones are where the worst conjectures were: measured 2.63 -> 1.70 mm
+    assert s_all["conj_max"] > 2.0 > s_lim["conj_max"]
 
 
 def test_a_blank_frame_mid_clip_is_bridged(performance):
