@@ -309,14 +309,13 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
         # a relation's prediction variance grows where the neighbour moves outside what the fit
         # saw (the leverage of regression: d' S^-1 d, d the neighbour's motion off its mean)
         dj = vj - mean_j[:, :, None]                                 # (P, K, F, 3)
-        lev = np.einsum("pkfa,pkab,pkfb->pkf", dj, np.linalg.inv(s_jj + ridge * _EYE3), dj)
+        lev = (dj @ np.linalg.inv(s_jj + ridge * _EYE3) * dj) @ _ONES3  # (P, K, F)
         pred_var = pair_var[..., None] * (1.0 + 1.0 / nn + lev)      # (P, K, F)
         w = np.where(mj & (n >= min_frames)[..., None], 1.0 / pred_var, 0.0)  # (P, K, F)
         total = w.sum(axis=1)                                        # (P, F)
-        # sum_k w_k ((v_j - mean_j) B_k + mean_i): one product over the K neighbours' 3 coordinates
-        wv = (vj * w[..., None]).transpose(0, 2, 1, 3).reshape(P, F, 3 * K)
-        c = mean_i - (mean_j[:, :, None] @ B)[:, :, 0]               # (P, K, 3)
-        mean = (wv @ B.reshape(P, 3 * K, 3) + w.transpose(0, 2, 1) @ c) / np.where(total > 0, total, 1.0)[..., None]
+        # sum_k w_k ((v_j - mean_j) B_k + mean_i) = sum_k w_k (dj B_k) + sum_k w_k mean_i
+        wdB = np.einsum("pkf,pkfb->pfb", w, dj @ B)
+        mean = (wdB + w.transpose(0, 2, 1) @ mean_i) / np.where(total > 0, total, 1.0)[..., None]
         have = total > 0
         est[:, lo:lo + P] = np.where(have[..., None], mean, np.nan).transpose(1, 0, 2)
         var[:, lo:lo + P] = np.where(have, 1.0 / np.where(have, total, 1.0), np.inf).T
