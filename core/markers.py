@@ -146,6 +146,13 @@ class MarkerExtractor:
         self.colors = colors
         self.settings = settings or ExtractionSettings()
         self._shape = None
+        # imported once here: a `from scipy.sparse import ...` per frame costs ~0.5 ms
+        import cv2
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        from scipy.spatial import cKDTree
+
+        self._libs = (cv2, coo_matrix, connected_components, cKDTree)
 
     def _buffers(self, shape):
         if self._shape != shape:
@@ -158,11 +165,7 @@ class MarkerExtractor:
             self._shape = shape
 
     def __call__(self, frame_bgr: np.ndarray) -> Detections:
-        import cv2
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-        from scipy.spatial import cKDTree
-
+        cv2, coo_matrix, connected_components, cKDTree = self._libs
         s = self.settings
         if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
             raise InputError("frames must be 8-bit BGR images")

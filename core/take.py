@@ -14,7 +14,8 @@ self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (coun
 labels, the rigid markers that carried the head pose); ``head_pose`` (per frame
 ``[rx, ry, rz, tx, ty, tz]``, radians and output units, eq. 5.4, relative to the first
 frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
-``conflicts``, ``conjectured``); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
+``conflicts``, ``conjectured``, ``withheld``: conjectures left as gaps, expected off by more than
+the limit); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
 tracker stage, ``tracking_frames_per_s``).
 """
 

@@ -259,9 +259,11 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
 
         def work(progress):
             from ..core.take import run_track
+            from ..core.track import TrackSettings
 
             report = run_track(source, camera, take, report=_report_path(take), colors=colors, layout=layout,
                                mirrors=mirrors, start=s.frame_start, end=end,
+                               settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
                                progress=lambda k: progress(0.8 * k / max(n, 1), "finding markers"),
                                track_progress=progress.stage(0.8, 1.0, "tracking"))
             return take, report
@@ -299,9 +301,11 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
 
         def work(progress):
             from ..core.take import track_detections
+            from ..core.track import TrackSettings
 
             report = track_detections(numbers, frames, camera, fps, take, report=_report_path(take),
                                       mirrors=mirrors, progress=progress.stage(0.0, 1.0, "tracking"),
+                                      settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
                                       timings={"detect": 0.0})
             return take, report
 

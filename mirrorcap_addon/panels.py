@@ -43,6 +43,7 @@ class MIRRORCAP_PT_track(_Panel, bpy.types.Panel):
         row = col.row(align=True)
         row.prop(s, "frame_start")
         row.prop(s, "frame_end")
+        col.prop(s, "conjecture_limit_mm")
         col.operator("mirrorcap.track", icon="TRACKING")
         col.operator("mirrorcap.track_clip_tracks", icon="TRACKING_FORWARDS")
         col.label(text="Esc cancels a running job", icon="INFO")

@@ -8,7 +8,7 @@ script needs no UI state at all.
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 #: the add-on's own module: this package's parent (``bl_ext.<repo>.mirrorcap`` inside Blender)
 ADDON_ID = __package__.rpartition(".")[0] or __package__
@@ -32,6 +32,9 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     take: StringProperty(name="Take", subtype="FILE_PATH", default="//take.c3d", description="TAKE.c3d to write or read")
     frame_start: IntProperty(name="First Frame", default=0, min=0, description="first video frame to track (0-based)")
     frame_end: IntProperty(name="End Frame", default=0, min=0, description="video frame to stop before (0: the end)")
+    conjecture_limit_mm: FloatProperty(name="Conjecture Limit (mm)", default=2.0, min=0.0, soft_max=10.0,
+                                       description="a hidden marker's conjectured position is kept only where its "
+                                                   "expected error (3 sigma) is within this; the rest stay gaps")
     # head (3D View)
     head_object: PointerProperty(name="Head", type=bpy.types.Object, poll=_is_mesh,
                                  description="The head mesh (region_* and lm_* vertex groups)")

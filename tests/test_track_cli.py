@@ -38,6 +38,7 @@ def test_track_with_metric_mirrors_matches_the_truth(rig_clip, capsys, tmp_path)
     assert code == 0, err
     report = json.loads(rep.read_text())
     assert report["units"] == "mm" and report["markers"]["count"] > 190
+    assert len(report["per_frame"]["withheld"]) == N_FRAMES
     c = ezc3d.c3d(str(out))
     pts = np.transpose(c["data"]["points"][:3], (2, 1, 0))  # (frames, markers, 3)
     assert pts.shape[0] == N_FRAMES and c["parameters"]["POINT"]["RATE"]["value"][0] == pytest.approx(30.0)
@@ -100,6 +101,7 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
         ([root / "png", "--camera", root / "camera.json", "--frames", "0:1"], "at least 2 frames"),
         ([root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json",
           "--known-length", "nobody", "m001", "20"], "not in the take"),
+        ([root / "png", "--camera", root / "camera.json", "--conjecture-limit", "-1"], "--conjecture-limit"),
     ]
     for args, message in cases:
         code, err = _run(["track", *args, "-o", out, "--report", out.with_suffix(".json"), "-q"], capsys)
