@@ -129,13 +129,14 @@ def _cmd_detect(args) -> int:
 def _cmd_track(args) -> int:
     from .boardcal import load_mirrors
     from .camera import Camera
-    from .markers import ColorClasses, load_rig_views
+    from .markers import ColorClasses, load_rig_rigid, load_rig_views
     from .take import run_track
     from .track import TrackSettings
 
     camera = Camera.load(args.camera)
     colors = ColorClasses.load(args.colors) if args.colors else None
     layout = load_rig_views(args.rig) if args.rig else None
+    rigid = load_rig_rigid(args.rig) if args.rig else None
     mirrors = load_mirrors(args.mirrors) if args.mirrors else None
     known = None
     if args.known_length:
@@ -152,7 +153,7 @@ def _cmd_track(args) -> int:
     source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
                        colors=colors, layout=layout, mirrors=mirrors, known_length=known, start=start, end=end,
-                       step=args.step, face_distance_mm=args.face_distance, settings=settings)
+                       step=args.step, face_distance_mm=args.face_distance, settings=settings, rigid=rigid)
     if not args.quiet:
         pf = report["per_frame"]
         n = report["frames"]["count"]
@@ -291,7 +292,7 @@ def build_parser(extra_commands=None) -> argparse.ArgumentParser:
                      help="report a hidden marker's conjectured position only where its expected error (3 sigma) "
                           "is within MM; the rest stay gaps (default 2; 'inf' keeps every conjecture, 0 none)")
     trk.add_argument("--colors", help="COLORS.json colour classes")
-    trk.add_argument("--rig", help="RIG.json view rectangles")
+    trk.add_argument("--rig", help="RIG.json view rectangles, and optionally the rigid markers (\"rigid\")")
     trk.set_defaults(func=_cmd_track)
 
     mir = sub.add_parser("mirrors", help="mirror planes in mm from a ChArUco board seen in all three views",

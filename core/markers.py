@@ -282,10 +282,13 @@ def split_views_by_gaps(x, min_gap_px: float) -> ViewLayout:
     return ViewLayout(boundaries=b)
 
 
-def load_rig_views(path) -> ViewLayout:
-    """The ``views`` rectangles of a RIG.json (see module docstring)."""
+def load_rig_views(path) -> ViewLayout | None:
+    """The ``views`` rectangles of a RIG.json (see module docstring); None when the file
+    only names the rigid markers (the views are then split automatically)."""
     data = read_json(path, "rig file")
     views = data.get("views") if isinstance(data, dict) else None
+    if views is None and isinstance(data, dict) and "rigid" in data:
+        return None
     if not isinstance(views, dict) or "direct" not in views:
         raise InputError(f"rig file {path}: needs \"views\" with at least \"direct\" (and mirror0, mirror1)")
     regions = {}
@@ -300,3 +303,41 @@ def load_rig_views(path) -> ViewLayout:
             raise InputError(f"rig file {path}: view {name!r} is an empty rectangle")
         regions[name] = (x0, y0, x1, y1)
     return ViewLayout(regions=regions)
+
+
+@dataclass
+class RigidMarkers:
+    """Which markers carry the head pose, as a RIG.json names them (``"rigid"``): those
+    whose first-frame image lies in ``region`` ``(x0, y0, x1, y1)`` pixels (e.g. a box
+    around the forehead and nose bridge) and/or whose colour class is one of ``colors``
+    (e.g. a head band's markers in a colour of their own). Either may be None."""
+
+    region: tuple | None = None
+    colors: tuple | None = None  # colour-class names
+
+
+def load_rig_rigid(path) -> RigidMarkers | None:
+    """The optional ``"rigid"`` entry of a RIG.json: ``{"region": [x0, y0, x1, y1],
+    "colors": ["green", ...]}`` (either or both); None when the file names no rigid markers."""
+    data = read_json(path, "rig file")
+    entry = data.get("rigid") if isinstance(data, dict) else None
+    if entry is None:
+        return None
+    if not isinstance(entry, dict) or not ({"region", "colors"} & set(entry)) or set(entry) - {"region", "colors"}:
+        raise InputError(f"rig file {path}: \"rigid\" must be {{\"region\": [x0, y0, x1, y1], \"colors\": [names]}} "
+                         "(either or both)")
+    region = colors = None
+    if "region" in entry:
+        try:
+            x0, y0, x1, y1 = (float(v) for v in entry["region"])
+        except (TypeError, ValueError):
+            raise InputError(f"rig file {path}: rigid region must be [x0, y0, x1, y1]") from None
+        if not (x1 > x0 and y1 > y0):
+            raise InputError(f"rig file {path}: the rigid region is an empty rectangle")
+        region = (x0, y0, x1, y1)
+    if "colors" in entry:
+        names = entry["colors"]
+        if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+            raise InputError(f"rig file {path}: rigid colors must be a list of colour-class names")
+        colors = tuple(names)
+    return RigidMarkers(region=region, colors=colors)

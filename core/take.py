@@ -11,7 +11,8 @@ face is put ``face_distance_mm`` (600) from the camera, which makes the units cl
 
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (count,
-labels, the rigid markers that carried the head pose); ``head_pose`` (per frame
+labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file" or
+"automatic"); ``head_pose`` (per frame
 ``[rx, ry, rz, tx, ty, tz]``, radians and output units, eq. 5.4, relative to the first
 frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
 ``conflicts``, ``conjectured``, ``withheld``: conjectures left as gaps, expected off by more than
@@ -31,7 +32,7 @@ from .atomic import write_files_atomically
 from .c3d import c3d_bytes
 from .camera import Camera
 from .errors import DegenerateError, InputError
-from .markers import ColorClasses, ExtractionSettings, ViewLayout
+from .markers import ColorClasses, ExtractionSettings, RigidMarkers, ViewLayout
 from .mirror import MirrorPlane
 from .track import TrackSettings, track
 from .video import VideoSource
@@ -66,20 +67,35 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
               extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
               known_length=None, start: int = 0, end: int | None = None, step: int = 1,
               settings: TrackSettings | None = None, progress=None, track_progress=None,
-              face_distance_mm: float = FACE_DISTANCE_MM) -> dict:
+              face_distance_mm: float = FACE_DISTANCE_MM, rigid: RigidMarkers | None = None) -> dict:
     """Track ``source`` and write the take (C3D) and its report (JSON). ``progress(frames_read)``
-    is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame."""
+    is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
+    ``rigid`` (RIG.json's ``"rigid"``) names the markers that carry the head pose."""
     from .detect import DetectionStream, _check_camera
 
     _check_camera(camera, source)
+    classes = colors or ColorClasses.default()
+    rigid_spec = rigid_selection(rigid, classes)
     t0 = time.perf_counter()
-    stream = DetectionStream(source, colors or ColorClasses.default(), extraction or ExtractionSettings(), layout,
+    stream = DetectionStream(source, classes, extraction or ExtractionSettings(), layout,
                              start, end, step, progress)
     numbers, frames = collect_detections(stream)
     t_detect = time.perf_counter() - t0
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
-                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm)
+                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid_spec)
+
+
+def rigid_selection(rigid: RigidMarkers | None, classes: ColorClasses) -> tuple | None:
+    """RIG.json's rigid markers as :func:`core.track.track` takes them: ``(region, colour
+    class indices)``; colour names not among ``classes`` are an input error."""
+    if rigid is None:
+        return None
+    unknown = [n for n in (rigid.colors or ()) if n not in classes.names]
+    if unknown:
+        raise InputError(f"RIG.json names rigid colour classes {', '.join(unknown)} that are not among "
+                         f"{', '.join(classes.names)}")
+    return rigid.region, None if rigid.colors is None else tuple(classes.names.index(n) for n in rigid.colors)
 
 
 def _median_depth(frames, camera: Camera, cals, ds) -> float:
@@ -101,9 +117,10 @@ def _median_depth(frames, camera: Camera, cals, ds) -> float:
 
 def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
-                     timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM) -> dict:
+                     timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None) -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
+    ``rigid``: the markers that carry the head pose, as :func:`core.track.track` takes them.
     Without MIRRORS.json the scale is set by putting the face ``face_distance_mm`` away."""
     from .selfcal import link_self_calibrated, self_calibrate_mirror
 
@@ -124,7 +141,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     else:
         planes, mirror_source, units = list(mirrors), "file", "mm"
     t1 = time.perf_counter()
-    result = track(frames, camera, planes, settings, progress=progress)
+    result = track(frames, camera, planes, settings, progress=progress, rigid=rigid)
     t_track = time.perf_counter() - t1
     points = result.points
     head = result.head_pose.copy()
@@ -150,7 +167,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     for k, p in enumerate(planes)],
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
-                    "rigid": [result.labels[i] for i in result.rigid]},
+                    "rigid": [result.labels[i] for i in result.rigid],
+                    "rigid_source": "automatic" if rigid is None else "rig file"},
         "head_pose": head.tolist(),
         "per_frame": {k: v.tolist() for k, v in result.stats.items()},
         "timings_s": {**(timings or {}), "track": t_track, "track_stages": result.timings,

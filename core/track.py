@@ -199,7 +199,9 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     ``mirror[k]``, ``mirror_color[k]`` in pixels, e.g. :class:`core.simulate.FrameDetections`)
     given the ``camera`` and mirror ``planes`` (``MirrorPlane`` or ``(normal, d)``).
 
-    Head motion comes from ``rigid`` markers (indices into the result's markers). When
+    Head motion comes from ``rigid`` markers: indices into the result's markers, or a
+    ``(region, colour classes)`` pair (:func:`rigid_by_image`) naming them by where they
+    are in the first frame's image and/or their colour (at least 4 must match). When
     not given they are found automatically: a first pass estimates the pose from all
     markers (robustly), then the ``rigid_fraction`` of markers that moved least
     relative to the head -- forehead, nose bridge, temples on a real face -- carry the
@@ -229,15 +231,23 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     cands = clip_candidates(det, normals, ds, camera.focal_px, s.band_px,
                             (z_mid - s.depth_margin_mm, z_mid + s.depth_margin_mm))
     lap("candidates")
-    given = None if rigid is None else np.asarray(rigid, int)
+    by_image = isinstance(rigid, tuple)
+    given = (rigid_by_image(camera, markers[1], markers[2], *rigid) if by_image
+             else None if rigid is None else np.asarray(rigid, int))
     first = _track_pass(det, cands, s, markers, given, None)
     lap("first_pass")
     if given is None:
-        motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
+        with np.errstate(invalid="ignore"):  # markers never reported: no motion to rank
+            motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
+        if np.isfinite(motion).sum() < 4:
+            raise DegenerateError("no rigid markers found: fewer than 4 markers were followed through the take; "
+                                  "name them in RIG.json (\"rigid\") or check the detections")
         motion = np.where(np.isfinite(motion), motion, np.inf)
         n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
         given = np.argsort(motion)[:n_rigid]
     markers = _add_late_markers(det, cands, s, markers, first, camera.focal_px)
+    if by_image:  # markers found later may be rigid too
+        given = rigid_by_image(camera, markers[1], markers[2], *rigid)
     lap("late_markers")
     result = _track_pass(det, cands, s, markers, given, progress)
     result.rigid = given
@@ -248,6 +258,23 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     lap("gap_fill")
     result.timings = timings
     return result
+
+
+def rigid_by_image(camera: Camera, neutral, colour, region=None, colours=None) -> np.ndarray:
+    """Indices of the markers whose neutral position projects into ``region`` ``(x0, y0,
+    x1, y1)`` (pixels, the first frame's image) and whose colour class is in ``colours``
+    (either None: no condition). Fewer than 4 is an error: the head pose needs them."""
+    ok = np.ones(len(neutral), bool)
+    if region is not None:
+        px = camera.project(np.asarray(neutral, float))
+        x0, y0, x1, y1 = region
+        ok &= (px[:, 0] >= x0) & (px[:, 0] < x1) & (px[:, 1] >= y0) & (px[:, 1] < y1)
+    if colours is not None:
+        ok &= np.isin(colour, list(colours))
+    if ok.sum() < 4:
+        raise DegenerateError(f"only {int(ok.sum())} markers match the rigid markers named (RIG.json \"rigid\": "
+                              f"region {region}, colour classes {colours}); at least 4 are needed to follow the head")
+    return np.flatnonzero(ok)
 
 
 def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_neighbours: int = 12,

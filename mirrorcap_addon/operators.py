@@ -150,8 +150,8 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         det = MarkerExtractor(colors, settings)(image)
         if len(det) == 0:
             raise InputError(f"no markers found in frame {n}: is the clip dark with bright dots?")
-        layout = (load_rig_views(_path(s.rig, what="rig file")) if s.rig
-                  else split_views_by_gaps(det.x, 2.0 * settings.marker_diameter_px))
+        layout = ((load_rig_views(_path(s.rig, what="rig file")) if s.rig else None)
+                  or split_views_by_gaps(det.x, 2.0 * settings.marker_diameter_px))
         view = layout.assign(det.x, det.y)
         clip = find_clip(video)
         count = detections_to_clip_tracks(clip, n, det.x, det.y, det.color, view, source.size)
@@ -247,13 +247,14 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
     video: StringProperty(name="Video", subtype="FILE_PATH", description="rig video (default: the scene's)")
 
     def prepare(self, context):
-        from ..core.markers import ColorClasses, load_rig_views
+        from ..core.markers import ColorClasses, load_rig_rigid, load_rig_views
         from ..core.video import open_source
 
         s, camera, mirrors, take = self._common(context)
         source = open_source(_need(_path(self.video, s.video, what="rig video"), "rig video"))
         colors = ColorClasses.load(_path(s.colors, what="colour file")) if s.colors else None
         layout = load_rig_views(_path(s.rig, what="rig file")) if s.rig else None
+        rigid = load_rig_rigid(_path(s.rig, what="rig file")) if s.rig else None
         end = s.frame_end or None
         n = len(range(s.frame_start, min(end or source.frame_count, source.frame_count)))
 
@@ -263,7 +264,7 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
 
             report = run_track(source, camera, take, report=_report_path(take), colors=colors, layout=layout,
                                mirrors=mirrors, start=s.frame_start, end=end,
-                               settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
+                               settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0), rigid=rigid,
                                progress=lambda k: progress(0.8 * k / max(n, 1), "finding markers"),
                                track_progress=progress.stage(0.8, 1.0, "tracking"))
             return take, report
@@ -285,7 +286,8 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
                                     description="the clip's tracking object holding the tracks (default: all)")
 
     def prepare(self, context):
-        from ..core.markers import load_rig_views
+        from ..core.markers import ColorClasses, load_rig_rigid, load_rig_views
+        from ..core.take import rigid_selection
         from .clip import clip_tracks_to_detections, find_clip
 
         s, camera, mirrors, take = self._common(context)
@@ -296,6 +298,9 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
             raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the "
                              f"clip is {clip.size[0]}x{clip.size[1]}")
         layout = load_rig_views(_path(s.rig, what="rig file")) if s.rig else None
+        rigid = rigid_selection(load_rig_rigid(_path(s.rig, what="rig file")) if s.rig else None,
+                                ColorClasses.load(_path(s.colors, what="colour file")) if s.colors
+                                else ColorClasses.default())
         numbers, frames = clip_tracks_to_detections(clip, layout, self.tracking_object or None)
         fps = float(clip.fps) or 30.0
 
@@ -306,7 +311,7 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
             report = track_detections(numbers, frames, camera, fps, take, report=_report_path(take),
                                       mirrors=mirrors, progress=progress.stage(0.0, 1.0, "tracking"),
                                       settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
-                                      timings={"detect": 0.0})
+                                      timings={"detect": 0.0}, rigid=rigid)
             return take, report
 
         return work

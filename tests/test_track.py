@@ -56,6 +56,41 @@ def test_clean_performance_is_tracked_without_identity_switches(performance):
     assert np.mean(np.linalg.norm(perf[4][:, s["ids"][result.rigid]], axis=2)) < 0.1
 
 
+def test_rigid_markers_named_by_region_carry_the_head_pose(performance):
+    """RIG.json's "rigid": the markers in a box around the forehead carry the head pose;
+    a box around the whole face (expression and all) biases it, and a box holding fewer
+    than 4 markers is refused."""
+    import cv2
+
+    from core.errors import DegenerateError
+    from core.motion import rotation_zyx
+    from core.track import rigid_by_image
+
+    rig, perf = performance
+    _, frames = synthetic_detections(rig, 80, seed=1, performance=perf, noise_px=0.05)
+    true_rv = np.array([cv2.Rodrigues(R)[0].ravel() for R in perf[2]])
+
+    def pose_error_deg(result):
+        est = np.array([cv2.Rodrigues(rotation_zyx(h[:3]))[0].ravel() for h in result.head_pose])
+        return np.degrees(np.max(np.linalg.norm(est - true_rv, axis=1)))
+
+    y = np.quantile(rig.camera.project(perf[0][0])[:, 1], 0.25)  # the top quarter of the face: no expression
+    upper = track(frames, rig.camera, rig.planes, rigid=((0, 0, 1280, y), None))
+    s = _score(frames, perf, upper)
+    assert s["switches"] == 0 and s["rms"] < 0.1
+    assert np.all(np.linalg.norm(perf[4][:, s["ids"][upper.rigid]], axis=2) == 0)  # only markers that never moved
+    assert len(upper.rigid) > 40
+    assert pose_error_deg(upper) < 0.1  # measured 0.04 deg (0.12 found automatically)
+    whole = track(frames, rig.camera, rig.planes, rigid=((0, 0, 1280, 720), None))
+    assert pose_error_deg(whole) > 0.5  # measured 1.0 deg: the expression pulls the fit
+    # colour classes narrow the region: the synthetic markers' classes split the forehead
+    colour0 = rigid_by_image(rig.camera, upper.neutral, upper.colour, (0, 0, 1280, y), (0,))
+    assert 4 <= len(colour0) < len(upper.rigid)
+    assert np.all(upper.colour[colour0] == 0)
+    with pytest.raises(DegenerateError, match="at least 4"):
+        track(frames, rig.camera, rig.planes, rigid=((0, 0, 1280, 100), None))
+
+
 def test_faults_missing_and_false_blobs(performance):
     rig, perf = performance
     _, frames = synthetic_detections(rig, 80, seed=2, performance=perf, noise_px=0.1, missing=0.1, false_blobs=0.2)

@@ -95,8 +95,18 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
     rig_file = tmp_path / "rig.json"
     rig_file.write_text(json.dumps({"views": {"mirror0": [0, 0, 420, 720], "direct": [420, 0, 860, 720],
                                               "mirror1": [860, 0, 1280, 720]}}))
+    rigid_files = {}
+    for name, entry in {"nowhere": {"region": [0, 0, 10, 10]}, "unknown": {"colors": ["ultraviolet"]},
+                        "empty": {"region": [50, 50, 10, 10]}, "typo": {"regoin": [0, 0, 10, 10]}}.items():
+        rigid_files[name] = tmp_path / f"rigid_{name}.json"
+        rigid_files[name].write_text(json.dumps({"rigid": entry}))
+    clip = [root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json", "--rig"]
     cases = [
         ([dark, "--camera", root / "camera.json", "--rig", rig_file], "mirror"),
+        ([*clip, rigid_files["nowhere"]], "at least 4 are needed"),
+        ([*clip, rigid_files["unknown"]], "ultraviolet"),
+        ([*clip, rigid_files["empty"]], "empty rectangle"),
+        ([*clip, rigid_files["typo"]], "\"rigid\" must be"),
         ([root / "png", "--camera", tmp_path / "small.json"], "640x480"),
         ([root / "png", "--camera", root / "camera.json", "--frames", "0:1"], "at least 2 frames"),
         ([root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json",
@@ -108,3 +118,26 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
         assert code == 2, (args, err)
         assert message in err, (args, err)
         assert list(out.parent.iterdir()) == []
+
+
+def test_track_with_rigid_markers_named_in_the_rig_file(rig_clip, capsys, tmp_path):
+    """A RIG.json with only "rigid" (the views split automatically): the markers imaged in
+    the forehead box carry the head pose, and the report says so."""
+    root, rig = rig_clip
+    truth0 = rig_motion(rig, 0, N_FRAMES)[0]
+    px = rig.camera.project(truth0)
+    y = float(np.quantile(px[:, 1], 0.25))
+    rig_file = tmp_path / "rig.json"
+    rig_file.write_text(json.dumps({"rigid": {"region": [0, 0, 1280, y]}}))
+    out, rep = tmp_path / "take.c3d", tmp_path / "report.json"
+    code, err = _run(["track", root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json",
+                      "--rig", rig_file, "-o", out, "--report", rep, "-q"], capsys)
+    assert code == 0, err
+    report = json.loads(rep.read_text())
+    assert report["markers"]["rigid_source"] == "rig file"
+    labels = report["markers"]["labels"]
+    rigid = [labels.index(name) for name in report["markers"]["rigid"]]
+    pts = np.transpose(ezc3d.c3d(str(out))["data"]["points"][:3], (2, 1, 0))
+    first = pts[np.argmax(np.all(np.isfinite(pts), axis=2), axis=0), np.arange(pts.shape[1])]
+    rows = rig.camera.project(first[rigid])[:, 1]
+    assert len(rigid) > 30 and np.all(rows < y + 1.0)  # every rigid marker is imaged in the box
