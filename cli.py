@@ -141,7 +141,7 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
     wall = time.perf_counter() - t0
     order = {str(t): i for i, t in enumerate(takes)}
     results.sort(key=lambda r: order[r["take"]])
-    summary = {"workers": workers, "takes": len(jobs), "failed": sum(not r["ok"] for r in results),
+    summary = {"workers": workers, "processes": n_proc, "takes": len(jobs), "failed": sum(not r["ok"] for r in results),
                "wall_seconds": wall, "results": results}
     write_files_atomically({out_dir / "batch.json": json.dumps(summary, indent=1) + "\n"})
     return summary
@@ -154,7 +154,8 @@ def _cmd_batch(args) -> int:
     summary = run_batch(args.takes, args.head, args.out, workers=args.workers, options=options, quiet=args.quiet)
     if not args.quiet:
         print(f"{summary['takes'] - summary['failed']} of {summary['takes']} takes baked in "
-              f"{summary['wall_seconds']:.1f} s with {summary['workers']} workers -> {args.out}/batch.json")
+              f"{summary['wall_seconds']:.1f} s with {summary['processes']} worker"
+              f"{'s' if summary['processes'] > 1 else ''} -> {args.out}/batch.json")
     return 1 if summary["failed"] else 0
 
 

@@ -25,7 +25,7 @@ def _loop_take(src: Path, dst: Path, frames: int) -> None:
     write_c3d(dst, d["labels"], pts, d["rate"])
 
 
-def run_batch_benchmark(copies: int = 4, repeats: int = 2, long_frames: int = 1800) -> dict:
+def run_batch_benchmark(copies: int = 4, repeats: int = 3, long_frames: int = 1800) -> dict:
     """Both take lengths; see the module text."""
     return {"sample_take": _run_batch(copies, repeats, None), f"looped_{long_frames}": _run_batch(copies, repeats,
                                                                                                  long_frames)}

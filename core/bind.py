@@ -148,15 +148,15 @@ def _irls_rigid(ref, cur, iterations):
     for _ in range(iterations):
         wn = w / w.sum(1, keepdims=True)
         ca = wn @ ref                                             # (F, 3)
-        cb = np.einsum("fm,fmi->fi", wn, cur)
-        H = np.einsum("fm,fmi,fmj->fij", wn, ref[None] - ca[:, None], cur - cb[:, None])
+        cb = (wn[:, None, :] @ cur)[:, 0]                           # (F, 3)
+        H = np.swapaxes(wn[:, :, None] * (ref[None] - ca[:, None]), 1, 2) @ (cur - cb[:, None])
         U, _, Vt = np.linalg.svd(H)
         V_ = np.swapaxes(Vt, 1, 2)
         D = np.tile(np.eye(3), (F, 1, 1))
         D[:, 2, 2] = np.sign(np.linalg.det(V_ @ np.swapaxes(U, 1, 2)))
         R = V_ @ D @ np.swapaxes(U, 1, 2)
         t = cb - np.einsum("fij,fj->fi", R, ca)
-        r = np.linalg.norm(np.einsum("fij,mj->fmi", R, ref) + t[:, None] - cur, axis=2)
+        r = np.linalg.norm(ref @ np.swapaxes(R, 1, 2) + t[:, None] - cur, axis=2)
         c = np.maximum(1.5 * np.median(r, axis=1, keepdims=True), 1e-9)
         w = 1.0 / (1.0 + (r / c) ** 2)
     return R, t, r

@@ -82,6 +82,9 @@ def blink_closure(n_frames: int, fps: float, interval_s: float = 2.5, duration_s
     return shape.max(axis=1, initial=0.0)
 
 
+DEFORM_BLOCK_FRAMES = 64  # frames per BLAS product in FaceRig.deform (a 7 MB buffer at 4,600 vertices)
+
+
 def _rotate(v, axis, angle):
     """Rodrigues: rotate vectors ``v (..., 3)`` about unit ``axis`` by ``angle (...)``."""
     c, s = np.cos(angle)[..., None], np.sin(angle)[..., None]
@@ -147,6 +150,13 @@ class FaceRig:
             target = G_jaw if r == jaw else G_main
             target[np.ix_(rows, cols)] += W[rows, r][:, None] * E
         self.G_main, self.G_jaw = G_main, G_jaw
+        # the blocks deform() multiplies: the jaw region's few rows and controls, and the
+        # controls some region uses (a dense product with the zeros costs ~0.5 s per minute)
+        self._main_cols = np.flatnonzero(np.any(G_main != 0, axis=0))
+        self._G_main_block = np.ascontiguousarray(G_main[:, self._main_cols].T)       # (cols, V)
+        self._jaw_rows = np.flatnonzero(np.any(G_jaw != 0, axis=1))
+        self._jaw_cols = np.flatnonzero(np.any(G_jaw != 0, axis=0))
+        self._G_jaw_block = np.ascontiguousarray(G_jaw[np.ix_(self._jaw_rows, self._jaw_cols)].T)  # (cols, rows)
         self.jaw_weight = W[:, jaw]
         # chin displacement from all markers (one global RBF row; exact if a marker sits on the chin)
         chin_rbf = RBFScattering(V[np.r_[mv, self.fixed]], k=self.s.k)
@@ -318,9 +328,23 @@ class FaceRig:
         n_f = self.fixed.size
         resid = Uc - J_ctrl
         resid[:, n_m + n_f:] = 0.0                       # hypothetical points ride the rigid jaw
-        # (V, C) @ (C, F*3): one BLAS product per part for all frames
-        D = (self.G_main @ Uc.transpose(1, 0, 2).reshape(n_c, -1)).reshape(len(V), F, 3).transpose(1, 0, 2)
-        D += (self.G_jaw @ resid.transpose(1, 0, 2).reshape(n_c, -1)).reshape(len(V), F, 3).transpose(1, 0, 2)
+        # BLAS products (F*3, C) @ (C, V) over blocks of frames, each laid out as (F, V, 3)
+        # through one small reused buffer: the (F, V, 3) result is the only take-sized array
+        cm, rj, cj = self._main_cols, self._jaw_rows, self._jaw_cols
+        D = np.empty((F, len(V), 3))
+        Um = Uc[:, cm].transpose(0, 2, 1).reshape(F * 3, cm.size)
+        block = min(F, DEFORM_BLOCK_FRAMES)
+        buf = np.empty((block * 3, len(V)))
+        for f0 in range(0, F, block):
+            f1 = min(F, f0 + block)
+            out = buf[: (f1 - f0) * 3]
+            np.matmul(Um[f0 * 3:f1 * 3], self._G_main_block, out=out)
+            out = out.reshape(f1 - f0, 3, len(V))
+            for k in range(3):
+                D[f0:f1, :, k] = out[:, k]
+        if rj.size:
+            D[:, rj] += ((resid[:, cj].transpose(0, 2, 1).reshape(F * 3, cj.size) @ self._G_jaw_block)
+                         .reshape(F, 3, rj.size).transpose(0, 2, 1))
         moving = self.jaw_moving
         J = self._jaw_displacement(V[moving], theta, stretch)
         D[:, moving] += self.jaw_weight[moving][None, :, None] * J
@@ -328,19 +352,20 @@ class FaceRig:
         D[:, self.head.members("teeth_upper")] = 0.0
         if self.inner.size:
             p0, q0, p1, b1 = self.lip_idx
-            X = V[None] + D
-            H = self._hermite(X[:, p0], X[:, q0], X[:, p1], X[:, b1], self.lip_t)
+            H = self._hermite(*(V[i][None] + D[:, i] for i in (p0, q0, p1, b1)), self.lip_t)
             off = _rotate(np.broadcast_to(self.lip_offset, (F,) + self.lip_offset.shape), self.hinge_axis,
                           np.broadcast_to(theta[:, None], (F, self.inner.size)))
             D[:, self.inner] = H + off - V[self.inner]
         closure = np.zeros(F)
         if self.eyelids:
             closure = blink_closure(F, fps, self.s.blink_interval_s, self.s.blink_duration_s, self.s.blink_seed)
+            shut = np.flatnonzero(closure > 0)  # blinks: a few frames of the take
             for lid in self.eyelids:
                 idx = lid["vertices"]
                 rel = V[idx] - lid["centre"]
-                ang = closure[:, None] * lid["weights"][None, :] * lid["angle"]
-                D[:, idx] += _rotate(np.broadcast_to(rel, (F,) + rel.shape), lid["axis"], ang) - rel[None]
+                ang = closure[shut, None] * lid["weights"][None, :] * lid["angle"]
+                D[np.ix_(shut, idx)] += _rotate(np.broadcast_to(rel, (shut.size,) + rel.shape), lid["axis"],
+                                                ang) - rel[None]
         if with_parts:
             return D, {"jaw_angle": theta, "jaw_stretch": stretch, "blink": closure, "chin": chin}
         return D
