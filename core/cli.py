@@ -162,6 +162,10 @@ def _cmd_track(args) -> int:
               f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts, "
               f"{np.mean(pf['withheld']):.1f} conjectures withheld; "
               f"tracking {report['timings_s']['tracking_frames_per_s']:.0f} frames/s")
+        undecided = report["markers"]["undecided"]
+        if undecided:
+            print(f"  {len(undecided)} direct-view markers of the first frames could not be paired with a mirror "
+                  f"image (no 3D position): REPORT.json markers.undecided lists where they are")
     return 0
 
 

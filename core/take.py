@@ -12,7 +12,10 @@ face is put ``face_distance_mm`` (600) from the camera, which makes the units cl
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (count,
 labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file" or
-"automatic"); ``head_pose`` (per frame
+"automatic"; ``undecided``: direct-view markers of the first frames that could not be
+paired with a mirror image and were not found later, each with the frame and pixel position
+where it was first seen, its colour class index, the frames it was seen in and the
+``reason``: "no mirror partner" or "ambiguous in mirror K" -- rival partners); ``head_pose`` (per frame
 ``[rx, ry, rz, tx, ty, tz]``, radians and output units, eq. 5.4, relative to the first
 frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
 ``conflicts``, ``conjectured``, ``withheld``: conjectures left as gaps, expected off by more than
@@ -168,7 +171,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
                     "rigid": [result.labels[i] for i in result.rigid],
-                    "rigid_source": "automatic" if rigid is None else "rig file"},
+                    "rigid_source": "automatic" if rigid is None else "rig file",
+                    "undecided": result.undecided},
         "head_pose": head.tolist(),
         "per_frame": {k: v.tolist() for k, v in result.stats.items()},
         "timings_s": {**(timings or {}), "track": t_track, "track_stages": result.timings,

@@ -87,6 +87,7 @@ class TrackResult:
     rigid: np.ndarray = None  # markers that carried the head pose
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)  # seconds per stage of :func:`track`
+    undecided: list = field(default_factory=list)  # direct-view markers of the first frames never paired (rows)
 
 
 def robust_rigid_fit(A, B, iterations: int = 5, weights=None):
@@ -110,10 +111,11 @@ def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int)
     """2D tracks of the direct view and of each mirror over ``frames``, and each direct
     track's partner track per mirror (``core.pairing``; -1: none). Returns
     ``(direct ids per frame, number of direct tracks, partner (K, n), mirror ids per
-    frame per mirror)``."""
+    frame per mirror, ambiguous (K, n): tracks with rival partners in that mirror)``."""
     dids, n_dt = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
     K = len(normals)
     partner = np.full((K, n_dt), -1)
+    ambiguous = np.zeros((K, n_dt), bool)
     mids_all = []
     for k in range(K):
         mids, _ = track_2d([f.mirror[k] for f in frames], [f.mirror_color[k] for f in frames])
@@ -121,8 +123,32 @@ def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int)
                             [f.direct_color for f in frames], [f.mirror_color[k] for f in frames], camera,
                             MirrorPlane(normal=normals[k], d=float(ds[k])), band_px=band_px, min_frames=min_frames)
         partner[k, pairs.direct_track] = pairs.mirror_track
+        ambiguous[k, pairs.ambiguous] = True
         mids_all.append(mids)
-    return dids, n_dt, partner, mids_all
+    return dids, n_dt, partner, mids_all, ambiguous
+
+
+def _undecided(frames, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
+    """Direct-view tracks of the first frames, seen in at least ``min_frames`` of them,
+    that no mirror track was paired with: markers whose 3D position cannot be decided
+    (procedure step 2). Per track: where it was first seen (frame, x, y px), its colour
+    class, the frames it was seen in, and why -- ``ambiguous`` (rival partners in a
+    mirror: the mirrors listed) or ``no mirror partner``."""
+    seen = np.zeros(n_dt, int)
+    first = np.full(n_dt, -1)
+    xy = np.zeros((n_dt, 2))
+    colour = np.zeros(n_dt, int)
+    for f in range(len(frames) - 1, -1, -1):  # backwards: the earliest sighting is written last
+        ids = np.asarray(dids[f], int)
+        if ids.size == 0:
+            continue
+        seen[ids] += 1
+        first[ids] = f
+        xy[ids] = np.asarray(frames[f].direct, float)
+        colour[ids] = np.asarray(frames[f].direct_color)
+    tracks = np.flatnonzero((seen >= min_frames) & np.all(partner < 0, axis=0))
+    return {"track": tracks, "frame": first[tracks], "xy": xy[tracks], "colour": colour[tracks],
+            "frames_seen": seen[tracks], "ambiguous_in": ambiguous[:, tracks].T}
 
 
 def _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all, tracks):
@@ -171,10 +197,13 @@ def _initial_markers(frames, camera, normals, ds, settings):
     markers both frames share (so markers hidden at frame 0 are tracked too).
     Returns each marker's frame-0 direct blob (-1 if absent), the neutral structure
     (N, 3), the markers' colour classes (N,) and the frame each is measured from (N,),
-    here 0."""
+    here 0; and the undecided direct-view tracks (:func:`_undecided`)."""
     W = min(settings.init_frames, len(frames))
     init = frames[:W]
-    dids, n_dt, partner, mids_all = _paired_tracks(init, camera, normals, ds, settings.band_px, min(5, W))
+    dids, n_dt, partner, mids_all, ambiguous = _paired_tracks(init, camera, normals, ds, settings.band_px,
+                                                               min(5, W))
+    undecided = _undecided(init, dids, n_dt, partner, ambiguous, min(5, W))
+    undecided["blobs"] = [np.asarray(d, int) for d in dids]  # track id of each direct blob, per frame
     tracks = np.flatnonzero(np.any(partner >= 0, axis=0))
     if tracks.size < 10:
         raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
@@ -190,7 +219,7 @@ def _initial_markers(frames, camera, normals, ds, settings):
             neutral[new] = pos[f, new] @ R.T + T
             known |= new
     keep = np.flatnonzero(known)
-    return blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)
+    return (blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)), undecided
 
 
 def track(frames, camera: Camera, planes, settings: TrackSettings | None = None, progress=None,
@@ -223,7 +252,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         clock.append(time.perf_counter())
         timings[name] = clock[-1] - clock[-2]
 
-    markers = _initial_markers(frames, camera, normals, ds, s)
+    markers, undecided = _initial_markers(frames, camera, normals, ds, s)
     n_initial = len(markers[1])
     lap("initial_markers")
     det = ClipDetections.from_frames(frames, camera)
@@ -256,8 +285,28 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     lap("final_pass")
     _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     lap("gap_fill")
+    result.undecided = _still_undecided(undecided, result)
     result.timings = timings
     return result
+
+
+def _still_undecided(undecided: dict, result: TrackResult) -> list:
+    """The undecided direct-view tracks of the first frames that the tracker did not
+    take up later (no blob of theirs became a marker's measurement), as report rows."""
+    blobs = undecided.pop("blobs")
+    taken = np.zeros(len(undecided["track"]), bool)
+    for f, ids in enumerate(blobs):
+        used = result.assigned_blob[f][result.assigned_blob[f] >= 0]
+        taken |= np.isin(undecided["track"], ids[used[used < len(ids)]])
+    rows = []
+    for i in np.flatnonzero(~taken):
+        mirrors = np.flatnonzero(undecided["ambiguous_in"][i]).tolist()
+        rows.append({"frame": int(undecided["frame"][i]), "x": round(float(undecided["xy"][i, 0]), 2),
+                     "y": round(float(undecided["xy"][i, 1]), 2), "colour": int(undecided["colour"][i]),
+                     "frames_seen": int(undecided["frames_seen"][i]),
+                     "reason": f"ambiguous in mirror {', '.join(map(str, mirrors))}" if mirrors
+                     else "no mirror partner"})
+    return rows
 
 
 def rigid_by_image(camera: Camera, neutral, colour, region=None, colours=None) -> np.ndarray:

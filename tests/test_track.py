@@ -91,6 +91,65 @@ def test_rigid_markers_named_by_region_carry_the_head_pose(performance):
         track(frames, rig.camera, rig.planes, rigid=((0, 0, 1280, 100), None))
 
 
+def test_markers_that_cannot_be_decided_are_reported(performance):
+    """Procedure step 2: a direct-view marker with no mirror image, and one whose mirror
+    image has a same-colour twin on its mirrored epipolar line, cannot be given a 3D
+    position; the result lists both, where they were first seen and why."""
+    import dataclasses
+
+    from core.mirror import reflect_points
+
+    rig, perf = performance
+    _, frames = synthetic_detections(rig, 80, seed=1, performance=perf, noise_px=0.05)
+    ids0 = [set(np.asarray(f.direct_id).tolist()) for f in frames[:15]]
+    in_m = [[set(np.asarray(f.mirror_id[k]).tolist()) for f in frames[:15]] for k in range(2)]
+    everywhere = set.intersection(*ids0)
+    # a marker seen directly and in both mirrors throughout: its mirror images are removed
+    lost = min(m for m in everywhere if all(m in s for k in range(2) for s in in_m[k]))
+    # one seen directly and in mirror 0 only: its mirror 0 image gets a twin 15 mm deeper along the ray
+    twin = min(m for m in everywhere if all(m in s for s in in_m[0]) and not any(m in s for s in in_m[1]))
+    n0, d0 = rig.planes[0]
+    edited = []
+    for f, fr in enumerate(frames):
+        mirror, colour, mid = list(fr.mirror), list(fr.mirror_color), list(fr.mirror_id)
+        for k in range(2):
+            keep = np.asarray(mid[k]) != lost
+            mirror[k], colour[k], mid[k] = np.asarray(mirror[k])[keep], np.asarray(colour[k])[keep], np.asarray(mid[k])[keep]
+        sel = np.flatnonzero(np.asarray(mid[0]) == twin)
+        if sel.size:
+            X = perf[0][f][twin]  # camera frame, mm
+            deeper = X * (1 + 15.0 / np.linalg.norm(X))
+            px = rig.camera.project(reflect_points(deeper[None], n0, d0))
+            mirror[0] = np.r_[mirror[0], px]
+            colour[0] = np.r_[colour[0], np.asarray(colour[0])[sel]]
+            mid[0] = np.r_[mid[0], [-1]]
+        edited.append(dataclasses.replace(fr, mirror=mirror, mirror_color=colour, mirror_id=mid))
+    # the first frames' pairing leaves both undecided, the twin as ambiguous in mirror 0
+    from core.track import _paired_tracks, _undecided
+
+    normals = np.stack([n for n, _ in rig.planes])
+    ds = np.array([d for _, d in rig.planes])
+    dids, n_dt, partner, _, ambiguous = _paired_tracks(edited[:15], rig.camera, normals, ds, 1.0, 5)
+    first = _undecided(edited[:15], dids, n_dt, partner, ambiguous, 5)
+    track_of = {m: dids[0][np.flatnonzero(np.asarray(frames[0].direct_id) == m)[0]] for m in (lost, twin)}
+    assert set(first["track"].tolist()) == set(track_of.values())
+    amb = dict(zip(first["track"].tolist(), first["ambiguous_in"].tolist()))
+    assert amb[track_of[twin]] == [True, False] and amb[track_of[lost]] == [False, False]
+    # the tracker: the marker with no mirror image is reported undecided, where it was seen;
+    # the twin's marker is taken up later (late markers: its true chain) at its true position
+    result = track(edited, rig.camera, rig.planes)
+    assert len(result.undecided) == 1, result.undecided
+    r = result.undecided[0]
+    assert r["reason"] == "no mirror partner" and r["frame"] == 0 and r["frames_seen"] == 15
+    at = np.flatnonzero(np.asarray(frames[0].direct_id) == lost)[0]
+    assert np.hypot(r["x"] - frames[0].direct[at, 0], r["y"] - frames[0].direct[at, 1]) < 0.01
+    assert r["colour"] == frames[0].direct_color[at]
+    err = np.nanmin(np.nanmedian(np.linalg.norm(result.points - perf[0][:, twin][:, None], axis=2), axis=0))
+    assert err < 0.1  # mm: the true position, not the twin's 15 mm deeper
+    # the clean clip has none
+    assert track(frames, rig.camera, rig.planes).undecided == []
+
+
 def test_faults_missing_and_false_blobs(performance):
     rig, perf = performance
     _, frames = synthetic_detections(rig, 80, seed=2, performance=perf, noise_px=0.1, missing=0.1, false_blobs=0.2)
