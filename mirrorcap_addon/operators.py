@@ -237,7 +237,7 @@ class _TrackInputs:
         undecided = len(report["markers"].get("undecided", ()))
         return (f"{report['markers']['count']} markers over {report['frames']['count']} frames -> {take.name}; "
                 f"{np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured per frame"
-                + (f"; {undecided} markers seen only directly (no 3D; listed in the report)" if undecided else ""))
+                + (f"; {undecided} markers not paired with a mirror image (no 3D; listed in the report)" if undecided else ""))
 
 
 class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
