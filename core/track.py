@@ -488,9 +488,7 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     R = rotation_zyx(pose[:, :3])  # (M, 3, 3)
     head = np.einsum("mji,mj->mi", R, cands.points[idx] - pose[:, 3:])  # R^T (X - T)
     col = det.colour[0][cands.direct[idx]]
-    pairs = cKDTree(np.c_[head, col * COLOUR_SPACING_MM]).query_pairs(link_mm, output_type="ndarray")
-    gap = np.abs(f[pairs[:, 0]] - f[pairs[:, 1]]) if len(pairs) else np.zeros(0, int)
-    pairs = pairs[(gap >= 1) & (gap <= link_frames)] if len(pairs) else pairs
+    pairs = _pairs_frames_apart(np.c_[head, col * COLOUR_SPACING_MM], f, link_mm, link_frames)
     n_comp, comp = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
                                                    shape=(idx.size, idx.size)), directed=False)
     # frames per chain (a chain may hold two candidates of one frame: count frames once)
@@ -561,6 +559,26 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
         return markers
     return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
             np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
+
+
+def _pairs_frames_apart(points, frame, within: float, max_gap: int) -> np.ndarray:
+    """Pairs ``(P, 2)`` of ``points`` ``(M, D)`` within ``within`` of each other whose
+    ``frame`` numbers are 1 to ``max_gap`` apart (earlier first). Per gap one KD-tree
+    query against the points shifted by the gap, the frame as a coordinate far larger
+    than ``within``: a blob that sits still over the take gives pairs with the few
+    frames next to it, not with all of them."""
+    from scipy.spatial import cKDTree
+
+    if len(points) == 0:
+        return np.zeros((0, 2), int)
+    spacing = 10.0 * (np.abs(points).max() + within + 1.0)
+    tree = cKDTree(np.c_[points, frame * spacing])
+    out = []
+    for gap in range(1, max_gap + 1):
+        later = cKDTree(np.c_[points, (frame - gap) * spacing])
+        pairs = tree.sparse_distance_matrix(later, within, output_type="ndarray")
+        out.append(np.c_[pairs["i"], pairs["j"]])
+    return np.concatenate(out).astype(int)
 
 
 def _nearest_same_frame(tracked, frame, query, within: float) -> np.ndarray:

@@ -87,6 +87,13 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
         img[:, :420] = 0
         img[:, 860:] = 0
         cv2.imwrite(str(dark / f"{f}.png"), img)
+    few = tmp_path / "few"
+    few.mkdir()
+    for f in range(3):  # an 8-pixel strip of the face: too few markers anywhere
+        img = cv2.imread(str(root / "png" / f"{f:03d}.png"))
+        strip = np.zeros_like(img)
+        strip[300:308] = img[300:308]
+        cv2.imwrite(str(few / f"{f}.png"), strip)
     small = json.loads((root / "camera.json").read_text())
     small["image_size"] = [640, 480]
     (tmp_path / "small.json").write_text(json.dumps(small))
@@ -103,6 +110,8 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
     clip = [root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json", "--rig"]
     cases = [
         ([dark, "--camera", root / "camera.json", "--rig", rig_file], "mirror"),
+        ([few, "--camera", root / "camera.json"], "fewer than 6"),
+        ([few, "--camera", root / "camera.json", "--mirrors", root / "mirrors.json"], "could be paired"),
         ([*clip, rigid_files["nowhere"]], "at least 4 are needed"),
         ([*clip, rigid_files["unknown"]], "ultraviolet"),
         ([*clip, rigid_files["empty"]], "empty rectangle"),
