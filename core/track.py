@@ -465,7 +465,6 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
     taken for it)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
 
     first_blob, neutral, colour, entry = markers
     F = det.n_frames
