@@ -11,8 +11,8 @@ face is put ``face_distance_mm`` (600) from the camera, which makes the units cl
 
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (count,
-labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file" or
-"automatic"; ``undecided``: direct-view markers of the first frames that could not be
+labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file",
+"settings" (the add-on's) or "automatic"; ``undecided``: direct-view markers of the first frames that could not be
 paired with a mirror image and were not found later, each with the frame and pixel position
 where it was first seen, its colour class index, the frames it was seen in and the
 ``reason``: "no mirror partner" or "ambiguous in mirror K" -- rival partners); ``head_pose`` (per frame
@@ -70,15 +70,19 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
               extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
               known_length=None, start: int = 0, end: int | None = None, step: int = 1,
               settings: TrackSettings | None = None, progress=None, track_progress=None,
-              face_distance_mm: float = FACE_DISTANCE_MM, rigid: RigidMarkers | None = None) -> dict:
+              face_distance_mm: float = FACE_DISTANCE_MM, rigid: RigidMarkers | None = None,
+              rigid_spec=None, rigid_source: str = "rig file") -> dict:
     """Track ``source`` and write the take (C3D) and its report (JSON). ``progress(frames_read)``
     is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
-    ``rigid`` (RIG.json's ``"rigid"``) names the markers that carry the head pose."""
+    ``rigid`` (RIG.json's ``"rigid"``) names the markers that carry the head pose (or
+    ``rigid_spec``, already as :func:`rigid_selection` gives it; ``rigid_source`` says where
+    it came from in the report)."""
     from .detect import DetectionStream, _check_camera
 
     _check_camera(camera, source)
     classes = colors or ColorClasses.default()
-    rigid_spec = rigid_selection(rigid, classes)
+    if rigid_spec is None:
+        rigid_spec = rigid_selection(rigid, classes)
     t0 = time.perf_counter()
     stream = DetectionStream(source, classes, extraction or ExtractionSettings(), layout,
                              start, end, step, progress)
@@ -86,7 +90,8 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     t_detect = time.perf_counter() - t0
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
-                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid_spec)
+                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid_spec,
+                            rigid_source=rigid_source)
 
 
 def rigid_selection(rigid: RigidMarkers | None, classes: ColorClasses) -> tuple | None:
@@ -120,7 +125,8 @@ def _median_depth(frames, camera: Camera, cals, ds) -> float:
 
 def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
-                     timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None) -> dict:
+                     timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
+                     rigid_source: str = "rig file") -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
     ``rigid``: the markers that carry the head pose, as :func:`core.track.track` takes them.
@@ -171,7 +177,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
                     "rigid": [result.labels[i] for i in result.rigid],
-                    "rigid_source": "automatic" if rigid is None else "rig file",
+                    "rigid_source": "automatic" if rigid is None else rigid_source,
                     "undecided": result.undecided},
         "head_pose": head.tolist(),
         "per_frame": {k: v.tolist() for k, v in result.stats.items()},

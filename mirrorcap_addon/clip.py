@@ -107,3 +107,20 @@ def clip_tracks_to_detections(clip, layout=None, object_name: str | None = None)
         frames.append(FrameDets(direct=xy[v == 0], direct_color=k[v == 0], mirror=[xy[v == 1], xy[v == 2]],
                                 mirror_color=[k[v == 1], k[v == 2]]))
     return numbers.tolist(), frames
+
+
+def selected_track_pixels(clip, frame: int):
+    """Pixel positions ``(n, 2)`` at video ``frame`` of the clip's selected tracks, over all
+    tracking objects; MirrorCap's own mirror-view tracks are left out (the rigid region is a
+    box in the direct view)."""
+    w, h = clip.size
+    pts = []
+    for obj in clip.tracking.objects:
+        for track in obj.tracks:
+            if not track.select or track.name.startswith(tuple(f"{v}_" for v in VIEW_NAMES[1:])):
+                continue
+            marker = track.markers.find_frame(frame + 1)
+            if marker is None or marker.mute:
+                continue
+            pts.append((marker.co[0] * w - 0.5, (1.0 - marker.co[1]) * h - 0.5))
+    return np.array(pts, float).reshape(-1, 2)

@@ -160,6 +160,50 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
                 "shown as tracks of the clip's 'MirrorCap' object")
 
 
+def _rigid(s, classes):
+    """The rigid markers for the tracker: the settings' region/colours if set, else RIG.json's
+    ``"rigid"``, else None (automatic). Returns ``(spec for core.track, source name)``."""
+    from ..core.markers import RigidMarkers, load_rig_rigid
+    from ..core.take import rigid_selection
+
+    region = tuple(int(v) for v in s.rigid_region)
+    names = tuple(n.strip() for n in s.rigid_colors.split(",") if n.strip())
+    if any(region) or names:
+        if any(region) and not (region[2] > region[0] and region[3] > region[1]):
+            raise InputError(f"the rigid region {region} is an empty box: give x0, y0, x1, y1 with x1 > x0, y1 > y0")
+        rigid, source = RigidMarkers(region=region if any(region) else None, colors=names or None), "settings"
+    else:
+        rigid = load_rig_rigid(_path(s.rig, what="rig file")) if s.rig else None
+        source = "rig file"
+    spec = rigid_selection(rigid, classes)
+    return spec, (source if spec is not None else "automatic")
+
+
+class MIRRORCAP_OT_rigid_from_tracks(MirrorCapOperator):
+    """Set the rigid region (the markers that carry the head pose) to the box around the clip's selected tracks"""
+
+    bl_idname = "mirrorcap.rigid_from_tracks"
+    bl_label = "Rigid From Selected Tracks"
+
+    frame: IntProperty(name="Frame", default=-1, min=-1, description="video frame (0-based); -1: the scene's current")
+    margin_px: IntProperty(name="Margin", default=6, min=0, description="pixels added around the tracks")
+
+    def run(self, context):
+        from .clip import find_clip, selected_track_pixels
+
+        s = _settings(context)
+        clip = find_clip(_need(_path(s.video, what="rig video"), "rig video"))
+        n = context.scene.frame_current - 1 if self.frame < 0 else self.frame
+        xy = selected_track_pixels(clip, n)
+        if len(xy) < 4:
+            raise InputError(f"select at least 4 direct-view tracks at frame {n} (forehead, nose bridge); "
+                             f"{len(xy)} selected")
+        lo = np.maximum(np.floor(xy.min(axis=0)) - self.margin_px, 0)
+        hi = np.minimum(np.ceil(xy.max(axis=0)) + self.margin_px + 1, clip.size)
+        s.rigid_region = (int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1]))
+        return f"rigid region {tuple(s.rigid_region)} around {len(xy)} tracks"
+
+
 class MIRRORCAP_OT_solve_mirrors(MirrorCapJobOperator):
     """Mirror planes in millimetres from a clip of a ChArUco board seen directly and in both mirrors"""
 
@@ -249,14 +293,14 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
     video: StringProperty(name="Video", subtype="FILE_PATH", description="rig video (default: the scene's)")
 
     def prepare(self, context):
-        from ..core.markers import ColorClasses, load_rig_rigid, load_rig_views
+        from ..core.markers import ColorClasses, load_rig_views
         from ..core.video import open_source
 
         s, camera, mirrors, take = self._common(context)
         source = open_source(_need(_path(self.video, s.video, what="rig video"), "rig video"))
         colors = ColorClasses.load(_path(s.colors, what="colour file")) if s.colors else None
         layout = load_rig_views(_path(s.rig, what="rig file")) if s.rig else None
-        rigid = load_rig_rigid(_path(s.rig, what="rig file")) if s.rig else None
+        rigid, rigid_source = _rigid(s, colors or ColorClasses.default())
         end = s.frame_end or None
         n = len(range(s.frame_start, min(end or source.frame_count, source.frame_count)))
 
@@ -266,7 +310,8 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
 
             report = run_track(source, camera, take, report=_report_path(take), colors=colors, layout=layout,
                                mirrors=mirrors, start=s.frame_start, end=end,
-                               settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0), rigid=rigid,
+                               settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
+                               rigid_spec=rigid, rigid_source=rigid_source,
                                progress=lambda k: progress(0.8 * k / max(n, 1), "finding markers"),
                                track_progress=progress.stage(0.8, 1.0, "tracking"))
             return take, report
@@ -288,8 +333,7 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
                                     description="the clip's tracking object holding the tracks (default: all)")
 
     def prepare(self, context):
-        from ..core.markers import ColorClasses, load_rig_rigid, load_rig_views
-        from ..core.take import rigid_selection
+        from ..core.markers import ColorClasses, load_rig_views
         from .clip import clip_tracks_to_detections, find_clip
 
         s, camera, mirrors, take = self._common(context)
@@ -300,9 +344,8 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
             raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the "
                              f"clip is {clip.size[0]}x{clip.size[1]}")
         layout = load_rig_views(_path(s.rig, what="rig file")) if s.rig else None
-        rigid = rigid_selection(load_rig_rigid(_path(s.rig, what="rig file")) if s.rig else None,
-                                ColorClasses.load(_path(s.colors, what="colour file")) if s.colors
-                                else ColorClasses.default())
+        rigid, rigid_source = _rigid(s, ColorClasses.load(_path(s.colors, what="colour file")) if s.colors
+                                     else ColorClasses.default())
         numbers, frames = clip_tracks_to_detections(clip, layout, self.tracking_object or None)
         fps = float(clip.fps) or 30.0
 
@@ -313,7 +356,7 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
             report = track_detections(numbers, frames, camera, fps, take, report=_report_path(take),
                                       mirrors=mirrors, progress=progress.stage(0.0, 1.0, "tracking"),
                                       settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
-                                      timings={"detect": 0.0}, rigid=rigid)
+                                      timings={"detect": 0.0}, rigid=rigid, rigid_source=rigid_source)
             return take, report
 
         return work
@@ -502,7 +545,8 @@ class MIRRORCAP_OT_bake(MirrorCapJobOperator):
 
 
 CAPTURE_OPERATORS = (MIRRORCAP_OT_open_clip, MIRRORCAP_OT_calibrate_camera, MIRRORCAP_OT_detect_markers,
-                     MIRRORCAP_OT_solve_mirrors, MIRRORCAP_OT_track, MIRRORCAP_OT_track_clip_tracks)
+                     MIRRORCAP_OT_solve_mirrors, MIRRORCAP_OT_rigid_from_tracks, MIRRORCAP_OT_track,
+                     MIRRORCAP_OT_track_clip_tracks)
 ANIMATION_OPERATORS = (MIRRORCAP_OT_import_take, MIRRORCAP_OT_add_generic_head, MIRRORCAP_OT_fit_head,
                        MIRRORCAP_OT_bind, MIRRORCAP_OT_bake)
 CLASSES = CAPTURE_OPERATORS + ANIMATION_OPERATORS

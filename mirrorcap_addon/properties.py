@@ -8,7 +8,8 @@ script needs no UI state at all.
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty,
+                       StringProperty)
 
 #: the add-on's own module: this package's parent (``bl_ext.<repo>.mirrorcap`` inside Blender)
 ADDON_ID = __package__.rpartition(".")[0] or __package__
@@ -35,6 +36,13 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     conjecture_limit_mm: FloatProperty(name="Conjecture Limit (mm)", default=2.0, min=0.0, soft_max=10.0,
                                        description="a hidden marker's conjectured position is kept only where its "
                                                    "expected error (3 sigma) is within this; the rest stay gaps")
+    rigid_region: IntVectorProperty(name="Rigid Region", size=4, default=(0, 0, 0, 0), min=0,
+                                    description="x0, y0, x1, y1 (pixels, first frame, direct view): the markers in "
+                                                "this box (forehead, nose bridge) carry the head pose; all 0: RIG.json's "
+                                                "\"rigid\", else found automatically")
+    rigid_colors: StringProperty(name="Rigid Colours", default="",
+                                 description="comma-separated colour classes of the rigid markers (e.g. a head "
+                                             "band's); empty: any colour")
     # head (3D View)
     head_object: PointerProperty(name="Head", type=bpy.types.Object, poll=_is_mesh,
                                  description="The head mesh (region_* and lm_* vertex groups)")

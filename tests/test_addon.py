@@ -70,7 +70,7 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     assert res.returncode == 0, res.stdout + res.stderr
     out = json.loads(res.stdout.split("RESULT ", 1)[1])
     assert out["install"] == ["FINISHED"] and out["enabled"]
-    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 11
+    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 12
     assert len(out["panels"]) == 5
     assert out["workers"] == 2                       # AddonPreferences.bl_idname is the extension's package
     assert out["head"] == ["FINISHED"] and out["vertices"] == 4608 and out["keys"] == 53
@@ -97,6 +97,21 @@ def test_capture_operators(operators_run):
     assert sorted(set(out["take_fcurve_keys"])) and min(out["take_fcurve_keys"]) >= 10
     assert (work / "take.c3d").is_file() and (work / "take_report.json").is_file()
     assert out["clip_tracks"] == ["FINISHED"] and (work / "from_tracks.c3d").is_file()
+
+
+def test_rigid_markers_from_selected_tracks(operators_run):
+    """The artist's way to name the rigid markers: select the forehead's tracks in the clip,
+    press 'Rigid From Selected Tracks', track; the report says the settings carried the pose."""
+    out, work = operators_run
+    assert out["rigid_selected"] >= 20 and out["rigid_from_tracks"] == ["FINISHED"]
+    x0, y0, x1, y1 = out["rigid_region"]
+    assert 400 < x0 < x1 < 880 and 0 <= y0 < y1 < 360      # the direct view's upper half (mirror tracks ignored)
+    assert out["rigid_track"] == ["FINISHED"]
+    rep = out["rigid_report"]
+    assert rep["rigid_source"] == "settings" and len(rep["rigid"]) >= 10
+    assert out["rigid_too_few"][0] == "ERROR" and "at least 4" in out["rigid_too_few"][1]
+    assert out["rigid_nowhere"][0] == "ERROR" and "at least 4 are needed" in out["rigid_nowhere"][1]
+    assert not (work / "rigid_bad.c3d").exists()
 
 
 def test_cancelled_runs_leave_scene_and_folder_unchanged(operators_run):

@@ -73,6 +73,27 @@ s.camera = str(bad_cam)
 out["track_bad_camera"] = call(bpy.ops.mirrorcap.track, take=str(work / "bad.c3d"))
 s.camera = str(sample / "camera.json")
 
+# rigid markers from the clip: select the direct-view tracks on the top quarter of the face
+mc_tracks = clip.tracking.objects["MirrorCap"].tracks
+direct = [t for t in mc_tracks if t.name.startswith("direct_")]
+ys = sorted(t.markers.find_frame(1).co[1] for t in direct)
+top = ys[int(0.75 * len(ys))]                 # clip y points up: the top quarter has the largest y
+for t in mc_tracks:
+    t.select = t.name.startswith(("direct_", "mirror0_")) and t.markers.find_frame(1).co[1] >= top
+out["rigid_selected"] = sum(t.select and t.name.startswith("direct_") for t in mc_tracks)
+out["rigid_from_tracks"] = call(bpy.ops.mirrorcap.rigid_from_tracks, frame=0)
+out["rigid_region"] = list(s.rigid_region)
+out["rigid_track"] = call(bpy.ops.mirrorcap.track, take=str(work / "rigid.c3d"), import_result=False)
+rep = json.loads((work / "rigid_report.json").read_text()) if (work / "rigid_report.json").is_file() else {}
+out["rigid_report"] = {k: rep.get("markers", {}).get(k) for k in ("rigid_source", "rigid", "labels")}
+for t in mc_tracks:
+    t.select = False
+direct[0].select = direct[1].select = True
+out["rigid_too_few"] = call(bpy.ops.mirrorcap.rigid_from_tracks, frame=0)
+s.rigid_region = (0, 0, 10, 10)               # a box with no marker: one clear error
+out["rigid_nowhere"] = call(bpy.ops.mirrorcap.track, take=str(work / "rigid_bad.c3d"), import_result=False)
+s.rigid_region = (0, 0, 0, 0)
+
 # Blender's own 2D tracks as the input: every detection of 12 frames as a one-frame track
 from mirrorcap.core.markers import ColorClasses, MarkerExtractor, load_rig_views  # noqa: E402
 from mirrorcap.core.video import open_source  # noqa: E402
