@@ -79,7 +79,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
         names = [f"frame_{i + 1:05d}" for i in range(F)]
         for i, name in enumerate(names):
             kb = obj.shape_key_add(name=name, from_mix=False)
-            kb.data.foreach_set("co", core_to_blender(neutral_mm + D[i]).astype(np.float32).ravel())
+            kb.points.foreach_set("co", core_to_blender(neutral_mm + D[i]).astype(np.float32).ravel())
             if progress and i % 100 == 0:
                 progress(i / F)
         # each key: 0 the frame before, 1 on its frame, 0 the frame after (constant steps)
@@ -91,7 +91,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
         for k, name in enumerate(names):
             kb = obj.shape_key_add(name=name, from_mix=False)
             kb.slider_min, kb.slider_max = -1.0, 1.0
-            kb.data.foreach_set("co", core_to_blender(neutral_mm + pca.modes[k]).astype(np.float32).ravel())
+            kb.points.foreach_set("co", core_to_blender(neutral_mm + pca.modes[k]).astype(np.float32).ravel())
         _key_fcurves(key, action, names, frames, pca.weights.T, "LINEAR")
         out.update({"modes": int(n_modes), "pca_max_error_mm": pca.max_error_mm, "pca_mean_error_mm": pca.mean_error_mm,
                     "energy": [float(e) for e in pca.energy]})

@@ -53,7 +53,7 @@ def new_head_object(head: HeadModel, shape_keys: dict | None = None, name: str |
         obj.shape_key_add(name="Basis", from_mix=False)
         for kname in sorted(shape_keys):
             kb = obj.shape_key_add(name=kname, from_mix=False)
-            kb.data.foreach_set("co", core_to_blender(head.vertices + shape_keys[kname]).astype(np.float32).ravel())
+            kb.points.foreach_set("co", core_to_blender(head.vertices + shape_keys[kname]).astype(np.float32).ravel())
         mesh.shape_keys.use_relative = True
     return obj
 
@@ -68,7 +68,7 @@ def read_head(obj) -> HeadModel:
         raise InputError(f"the head {obj.name!r} has no vertices")
     co = np.empty(nv * 3, np.float32)
     if mesh.shape_keys is not None:
-        mesh.shape_keys.reference_key.data.foreach_get("co", co)
+        mesh.shape_keys.reference_key.points.foreach_get("co", co)
     else:
         mesh.vertices.foreach_get("co", co)
     sizes = np.empty(len(mesh.polygons), np.int32)
@@ -147,8 +147,8 @@ def replace_head_vertices(obj, old_core, new_core) -> None:
     co = np.empty(n, np.float32)
     if mesh.shape_keys is not None:
         for kb in mesh.shape_keys.key_blocks:
-            kb.data.foreach_get("co", co)
-            kb.data.foreach_set("co", co + delta)
+            kb.points.foreach_get("co", co)
+            kb.points.foreach_set("co", co + delta)
     mesh.vertices.foreach_get("co", co)
     mesh.vertices.foreach_set("co", co + delta)
     mesh.update()

@@ -45,11 +45,11 @@ def main() -> int:
     key = obj.data.shape_keys
     n = len(obj.data.vertices)
     basis = np.empty(3 * n, np.float32)
-    key.reference_key.data.foreach_get("co", basis)
+    key.reference_key.points.foreach_get("co", basis)
     move = []
     for i in range(120):
         co = np.empty(3 * n, np.float32)
-        key.key_blocks[f"frame_{i + 1:05d}"].data.foreach_get("co", co)
+        key.key_blocks[f"frame_{i + 1:05d}"].points.foreach_get("co", co)
         move.append(co.reshape(-1, 3) - basis.reshape(-1, 3))
     move = np.array(move) * 1000.0
     mag = np.linalg.norm(move, axis=2)
