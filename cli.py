@@ -36,7 +36,8 @@ def _cmd_bake(args) -> int:
                            blink_interval_s=args.blink_interval)
     res = run_bake(args.take, args.head, args.output, object_name=args.object, mode=args.mode, n_modes=args.modes,
                    neutral_frame=args.neutral_frame, head_pose_report=args.head_pose, head_motion=args.head_motion,
-                   settings=settings, report=args.report, drop_unseen=args.drop_unseen)
+                   settings=settings, report=args.report, drop_unseen=args.drop_unseen,
+                   conjecture_unseen=args.conjecture_unseen)
     if not args.quiet:
         line = (f"baked {res['frames']} frames onto {res['object']} ({res['vertices']} vertices) as "
                 f"{'one shape key per frame' if res['mode'] == 'frames' else str(res['modes']) + ' PCA modes'}")
@@ -72,7 +73,8 @@ def _bake_one(job):
         res = run_bake(take, head, Path(out_dir) / f"{stem}.blend", object_name=options["object"],
                        mode=options["mode"], n_modes=options["modes"], neutral_frame=options["neutral_frame"],
                        head_motion=options["head_motion"], settings=settings,
-                       report=Path(out_dir) / f"{stem}.bake.json", drop_unseen=options["drop_unseen"])
+                       report=Path(out_dir) / f"{stem}.bake.json", drop_unseen=options["drop_unseen"],
+                       conjecture_unseen=options.get("conjecture_unseen", False))
         return {"take": str(take), "ok": True, "output": res["output"], "frames": res["frames"],
                 "seconds": time.perf_counter() - t0, "pid": os.getpid()}
     except MirrorCapError as exc:
@@ -150,7 +152,8 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
 def _cmd_batch(args) -> int:
     options = {"object": args.object, "mode": args.mode, "modes": args.modes, "neutral_frame": args.neutral_frame,
                "head_motion": args.head_motion, "no_blinks": args.no_blinks, "blink_seed": args.blink_seed,
-               "blink_interval": args.blink_interval, "k": args.k, "drop_unseen": args.drop_unseen}
+               "blink_interval": args.blink_interval, "k": args.k, "drop_unseen": args.drop_unseen,
+               "conjecture_unseen": args.conjecture_unseen}
     summary = run_batch(args.takes, args.head, args.out, workers=args.workers, options=options, quiet=args.quiet)
     if not args.quiet:
         print(f"{summary['takes'] - summary['failed']} of {summary['takes']} takes baked in "
@@ -172,8 +175,13 @@ def _bake_options(parser) -> None:
     parser.add_argument("--modes", type=int, default=8, help="number of PCA modes (default 8)")
     parser.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
     parser.add_argument("--head-motion", action="store_true", help="key the head motion as the object's transform")
-    parser.add_argument("--drop-unseen", action="store_true",
+    unseen = parser.add_mutually_exclusive_group()
+    unseen.add_argument("--drop-unseen", action="store_true",
                         help="leave out markers not seen in the neutral frame (default: refuse the take)")
+    unseen.add_argument("--conjecture-unseen", action="store_true",
+                        help="place markers not seen in the neutral frame (a tracker's markers first seen later) "
+                             "from their neighbours' learned relations; those expected off by more than 2 mm "
+                             "(3 sigma) are left out")
     parser.add_argument("--no-blinks", action="store_true", help="no synthetic eyelid blinks")
     parser.add_argument("--blink-seed", type=int, default=0, help="seed of the blink process (default 0)")
     parser.add_argument("--blink-interval", type=float, default=2.5, help="mean seconds between blinks (default 2.5)")

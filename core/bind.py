@@ -35,6 +35,7 @@ from .motion import conjecture_gaps, interpolate_in_time, neighbours
 
 GAP_NEIGHBOUR_RADIUS = 25.0  # take units (mm): neighbours whose learned relations fill a gap
 GAP_NEIGHBOURS = 12
+UNSEEN_LIMIT_MM = 2.0  # a conjectured neutral position (unseen="conjecture") expected off by more (3 sigma): left out
 
 
 def similarity_fit(A, B):
@@ -193,6 +194,7 @@ class Binding:
     filled: np.ndarray            # (F, M) frames where a gap was filled
     head_motion: tuple = None     # (R (F, 3, 3), t (F, 3)): the head's rigid motion from the neutral frame, head mm
     dropped: list = field(default_factory=list)  # labels left out: not seen in the neutral frame
+    conjectured_neutral: list = field(default_factory=list)  # labels bound from a conjectured neutral position
 
 
 def _landmark_of(label: str, landmarks: dict):
@@ -201,12 +203,18 @@ def _landmark_of(label: str, landmarks: dict):
 
 
 def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose=None,
-              exclude_groups=NOT_SKIN, unseen: str = "error") -> Binding:
+              exclude_groups=NOT_SKIN, unseen: str = "error", unseen_limit_mm: float = UNSEEN_LIMIT_MM) -> Binding:
     """Register a take ``points (F, M, 3)`` (NaN = gap) to ``head``; see the module text.
     Markers not seen in the neutral frame are an error, or with ``unseen="drop"`` are left
-    out (``Binding.dropped``; a tracker's markers first seen later in the take)."""
-    if unseen not in ("error", "drop"):
-        raise ValueError("unseen must be 'error' or 'drop'")
+    out (``Binding.dropped``; a tracker's markers first seen later in the take). With
+    ``unseen="conjecture"`` their neutral-frame position is conjectured from the neighbours'
+    learned relations (:func:`core.motion.conjecture_gaps`, the gap reaching back from
+    their first sighting) and they are bound like the others (``Binding.conjectured_neutral``);
+    one whose conjecture is expected off by more than ``unseen_limit_mm`` (3 sigma: the
+    relations' sd grown with the square root of the frames to its first sighting) is left
+    out."""
+    if unseen not in ("error", "drop", "conjecture"):
+        raise ValueError("unseen must be 'error', 'drop' or 'conjecture'")
     from scipy.optimize import linear_sum_assignment
     from scipy.spatial import cKDTree
 
@@ -222,13 +230,16 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     valid = np.all(np.isfinite(p), axis=2)
     seen = valid[neutral_frame]
     dropped = [labels[i] for i in np.flatnonzero(~seen)]
+    if dropped and unseen == "conjecture" and seen.sum() < 3:
+        raise InputError(f"only {int(seen.sum())} markers are seen in the neutral frame {neutral_frame}")
     if dropped and unseen == "drop":
         if seen.sum() < 3:
             raise InputError(f"only {int(seen.sum())} markers are seen in the neutral frame {neutral_frame}")
         p, labels, valid = p[:, seen], [s for s, k in zip(labels, seen) if k], valid[:, seen]
         F, M, _ = p.shape
         seen = valid[neutral_frame]
-    if not seen.all():
+    late = ~seen if unseen == "conjecture" else np.zeros(M, bool)
+    if not (seen | late).all():
         missing = [labels[i] for i in np.flatnonzero(~seen)]
         raise InputError(f"the take's marker count changes: {len(missing)} of {M} markers are missing in the "
                          f"neutral frame {neutral_frame} ({', '.join(missing[:5])}{', ...' if len(missing) > 5 else ''}); "
@@ -236,8 +247,6 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
                          "(--drop-unseen)")
     head.validate()
     lms = head.landmarks()
-    pairs = [(i, _landmark_of(s, lms)) for i, s in enumerate(labels)]
-    pairs = [(i, n) for i, n in pairs if n is not None]
     filled = ~valid
     p = fill_gaps(p)
     if head_pose is None:
@@ -252,10 +261,25 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         t = hp[:, :, 3] - np.einsum("fij,j->fi", R, tn)
     # undo the head motion: q = R^T (p - t), in the neutral frame's pose
     q = np.einsum("fji,fmj->fmi", R, p - t[:, None, :])
+    conjectured_neutral = []
     if filled.any():  # gaps follow the neighbours that moved like the marker (time interpolation where none can)
         nidx, _ = neighbours(q[neutral_frame], GAP_NEIGHBOUR_RADIUS)
-        motion, _ = conjecture_gaps(q - q[neutral_frame], valid, filled, nidx[:, :GAP_NEIGHBOURS])
-        q = np.where(np.isfinite(motion[..., :1]), q[neutral_frame] + motion, q)
+        # motion from the neutral frame; a marker first seen later: from its first sighting,
+        # so its neutral position is the conjecture of the gap reaching back to the neutral frame
+        first = np.argmax(valid, axis=0)
+        base = q[np.where(late, first, neutral_frame), np.arange(M)]
+        motion, sd = conjecture_gaps(q - base, valid, filled, nidx[:, :GAP_NEIGHBOURS])
+        q = np.where(np.isfinite(motion[..., :1]), base + motion, q)
+        if late.any():
+            expected = 3.0 * sd[neutral_frame] * np.sqrt(np.maximum(np.abs(first - neutral_frame), 1))
+            keep = ~late | (expected <= unseen_limit_mm)  # NaN (no related neighbour): left out
+            dropped = [labels[i] for i in np.flatnonzero(~keep)]
+            conjectured_neutral = [labels[i] for i in np.flatnonzero(late & keep)]
+            q, valid, filled = q[:, keep], valid[:, keep], filled[:, keep]
+            labels = [lab for lab, k in zip(labels, keep) if k]
+            M = len(labels)
+    pairs = [(i, _landmark_of(s, lms)) for i, s in enumerate(labels)]
+    pairs = [(i, n) for i, n in pairs if n is not None]
     if len(pairs) >= 3:
         idx = np.array([i for i, _ in pairs])
         target = head.vertices[[lms[n] for _, n in pairs]]
@@ -294,4 +318,5 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     return Binding(labels=labels, vertices=vert, distance_mm=d, displacements=aligned - aligned[neutral_frame],
                    markers_head=aligned, scale=s, landmark_rms_mm=rms,
                    landmarks_used=[n for _, n in pairs] if registration == "landmarks" else [],
-                   registration=registration, filled=filled, head_motion=(Rh, th), dropped=dropped if unseen == "drop" else [])
+                   registration=registration, filled=filled, head_motion=(Rh, th),
+                   dropped=dropped if unseen in ("drop", "conjecture") else [], conjectured_neutral=conjectured_neutral)

@@ -127,8 +127,11 @@ def _quaternions(R):
 
 def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n_modes: int = 8,
              neutral_frame: int = 0, head_pose_report=None, head_motion: bool = False,
-             settings: RigSettings | None = None, report=None, progress=None, drop_unseen: bool = False) -> dict:
-    """The whole ``mirrorcap bake``: read, bind, rig, bake, save atomically. Returns the report."""
+             settings: RigSettings | None = None, report=None, progress=None, drop_unseen: bool = False,
+             conjecture_unseen: bool = False) -> dict:
+    """The whole ``mirrorcap bake``: read, bind, rig, bake, save atomically. Returns the report.
+    Markers not seen in the neutral frame: refused, left out (``drop_unseen``) or placed from
+    their neighbours (``conjecture_unseen``, :func:`core.bind.bind_take`)."""
     if mode not in MODES:
         raise InputError(f"--mode must be one of {', '.join(MODES)}")
     timings = {}
@@ -159,7 +162,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
     timings["read_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     binding = bind_take(head, data["labels"], data["points"], neutral_frame=neutral_frame, head_pose=pose,
-                        unseen="drop" if drop_unseen else "error")
+                        unseen="conjecture" if conjecture_unseen else "drop" if drop_unseen else "error")
     rig = FaceRig(head, binding.vertices, settings)
     D, parts = rig.deform(binding.displacements, fps=data["rate"], with_parts=True)
     timings["rig_s"] = time.perf_counter() - t1
@@ -176,6 +179,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
         "take": str(take), "head": str(head_blend), "object": obj.name, "output": str(output), **out,
         "rate": data["rate"], "markers": len(data["labels"]), "landmarks_used": binding.landmarks_used,
         "registration": binding.registration, "markers_dropped_unseen": binding.dropped,
+        "markers_neutral_conjectured": binding.conjectured_neutral,
         "landmark_rms_mm": binding.landmark_rms_mm, "scale_head_mm_per_take_unit": binding.scale,
         "binding_distance_mm": {"max": float(binding.distance_mm.max()), "mean": float(binding.distance_mm.mean())},
         "gaps_filled": int(binding.filled.sum()),

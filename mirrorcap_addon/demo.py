@@ -148,7 +148,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     hp = np.asarray(report["head_pose"], float)
     pose = np.concatenate([rotation_zyx(hp[:, :3]), hp[:, 3:, None]], axis=2)
     binding = _step("bind", timings, bind_take, fitted, take["labels"], take["points"], head_pose=pose,
-                    unseen="drop")
+                    unseen="conjecture")
     say("4/5 rig+bake   face rig on every frame -> shape keys")
     rig = FaceRig(fitted, binding.vertices, RigSettings(blinks=True))
     D = _step("rig", timings, rig.deform, binding.displacements, fps)
@@ -200,7 +200,8 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
                 "error_to_true_face_rms_mm": float(np.sqrt(np.mean(fit_err ** 2))),
                 "error_to_true_face_p95_mm": float(np.percentile(fit_err, 95))},
         "bind": {"registration": binding.registration, "surface_rms_mm": binding.landmark_rms_mm,
-                 "markers": len(binding.labels), "markers_first_seen_later": binding.dropped,
+                 "markers": len(binding.labels), "markers_neutral_conjectured": binding.conjectured_neutral,
+                 "markers_left_out": binding.dropped,
                  "take_units_to_mm": binding.scale},
         "animation": {"vertices_scored": int(region.sum()),
                       "displacement_error_rms_mm": float(np.sqrt(np.mean(anim_err ** 2))),

@@ -160,6 +160,11 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
                 "shown as tracks of the clip's 'MirrorCap' object")
 
 
+def _unseen(op) -> str:
+    """bind_take's ``unseen`` from an operator's Conjecture / Drop Unseen Markers options."""
+    return "conjecture" if op.conjecture_unseen else "drop" if op.drop_unseen else "error"
+
+
 def _rigid(s, classes):
     """The rigid markers for the tracker: the settings' region/colours if set, else RIG.json's
     ``"rigid"``, else None (automatic). Returns ``(spec for core.track, source name)``."""
@@ -465,6 +470,10 @@ class MIRRORCAP_OT_bind(MirrorCapOperator):
     neutral_frame: IntProperty(name="Neutral Frame", default=0, min=0)
     drop_unseen: BoolProperty(name="Drop Unseen Markers", default=True,
                               description="leave out markers not seen in the neutral frame (else refuse the take)")
+    conjecture_unseen: BoolProperty(name="Conjecture Unseen Markers", default=True,
+                                    description="place markers not seen in the neutral frame from their neighbours' "
+                                                "learned relations; those expected off by more than 2 mm are left "
+                                                "out (off: Drop Unseen Markers decides)")
 
     def run(self, context):
         from ..core.bind import bind_take
@@ -475,7 +484,7 @@ class MIRRORCAP_OT_bind(MirrorCapOperator):
         data = read_c3d(_need(_path(self.take, _settings(context).take, what="take"), "take (TAKE.c3d)"))
         head = read_head(obj)
         b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame,
-                      unseen="drop" if self.drop_unseen else "error")
+                      unseen=_unseen(self))
         group = obj.vertex_groups.get("mirrorcap_bound") or obj.vertex_groups.new(name="mirrorcap_bound")
         group.remove(list(range(len(obj.data.vertices))))
         group.add([int(v) for v in b.vertices], 1.0, "REPLACE")
@@ -503,6 +512,10 @@ class MIRRORCAP_OT_bake(MirrorCapJobOperator):
     blink_seed: IntProperty(name="Blink Seed", default=0)
     drop_unseen: BoolProperty(name="Drop Unseen Markers", default=True,
                               description="leave out markers not seen in the neutral frame (else refuse the take)")
+    conjecture_unseen: BoolProperty(name="Conjecture Unseen Markers", default=True,
+                                    description="place markers not seen in the neutral frame from their neighbours' "
+                                                "learned relations; those expected off by more than 2 mm are left "
+                                                "out (off: Drop Unseen Markers decides)")
 
     def prepare(self, context):
         from ..core.c3d import read_c3d
@@ -522,7 +535,7 @@ class MIRRORCAP_OT_bake(MirrorCapJobOperator):
 
             progress(0.05, "binding")
             binding = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame,
-                                unseen="drop" if self.drop_unseen else "error")
+                                unseen=_unseen(self))
             progress(0.2, "face rig")
             rig = FaceRig(head, binding.vertices, RigSettings(blinks=self.blinks, blink_seed=self.blink_seed))
             D = rig.deform(binding.displacements, fps=data["rate"])

@@ -172,3 +172,28 @@ def test_bake_bad_input_fails_with_one_message_and_writes_nothing(tmp_path, head
         assert "Traceback" not in res.stderr
         assert not out.exists()
         assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]
+
+
+def test_bake_places_markers_first_seen_later_with_conjecture_unseen(tmp_path, head_and_keys):
+    """`--conjecture-unseen`: a tracker's markers first seen after the neutral frame are bound
+    from a conjectured neutral position (BAKE.json lists them) instead of refusing the take."""
+    import json
+
+    head, keys = head_and_keys
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=120, n_frames=40, seed=7)
+    late = [i for i, name in enumerate(labels) if not name.startswith("lm_")][:3]
+    pts[:5, late] = np.nan
+    take = tmp_path / "take.c3d"
+    write_c3d(take, labels, pts, 24.0)
+    refused = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "no.blend"])
+    assert refused.returncode == 2 and "marker count changes" in refused.stderr
+    both = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "no.blend",
+                 "--drop-unseen", "--conjecture-unseen"])
+    assert both.returncode == 2 and "not allowed with" in both.stderr
+    res = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "out.blend",
+                "--conjecture-unseen", "--report", tmp_path / "bake.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    report = json.loads((tmp_path / "bake.json").read_text())
+    assert sorted(report["markers_neutral_conjectured"]) == sorted(labels[i] for i in late)
+    assert report["markers"] == 120 and report["markers_dropped_unseen"] == []
+    assert not (tmp_path / "no.blend").exists()
