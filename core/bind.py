@@ -31,7 +31,7 @@ import numpy as np
 
 from .errors import InputError
 from .head import NOT_SKIN, HeadModel
-from .motion import conjecture_gaps, interpolate_in_time, neighbours
+from .motion import conjecture_gaps, grown_sd, interpolate_in_time, neighbours
 
 GAP_NEIGHBOUR_RADIUS = 25.0  # take units (mm): neighbours whose learned relations fill a gap
 GAP_NEIGHBOURS = 12
@@ -230,11 +230,9 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     valid = np.all(np.isfinite(p), axis=2)
     seen = valid[neutral_frame]
     dropped = [labels[i] for i in np.flatnonzero(~seen)]
-    if dropped and unseen == "conjecture" and seen.sum() < 3:
+    if dropped and unseen != "error" and seen.sum() < 3:
         raise InputError(f"only {int(seen.sum())} markers are seen in the neutral frame {neutral_frame}")
     if dropped and unseen == "drop":
-        if seen.sum() < 3:
-            raise InputError(f"only {int(seen.sum())} markers are seen in the neutral frame {neutral_frame}")
         p, labels, valid = p[:, seen], [s for s, k in zip(labels, seen) if k], valid[:, seen]
         F, M, _ = p.shape
         seen = valid[neutral_frame]
@@ -271,7 +269,7 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         motion, sd = conjecture_gaps(q - base, valid, filled, nidx[:, :GAP_NEIGHBOURS])
         q = np.where(np.isfinite(motion[..., :1]), base + motion, q)
         if late.any():
-            expected = 3.0 * sd[neutral_frame] * np.sqrt(np.maximum(np.abs(first - neutral_frame), 1))
+            expected = 3.0 * grown_sd(sd[neutral_frame], np.abs(first - neutral_frame))
             keep = ~late | (expected <= unseen_limit_mm)  # NaN (no related neighbour): left out
             dropped = [labels[i] for i in np.flatnonzero(~keep)]
             conjectured_neutral = [labels[i] for i in np.flatnonzero(late & keep)]

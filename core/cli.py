@@ -130,13 +130,13 @@ def _cmd_track(args) -> int:
     from .boardcal import load_mirrors
     from .camera import Camera
     from .markers import ColorClasses, load_rig_rigid, load_rig_views
-    from .take import run_track
+    from .take import rigid_selection, run_track
     from .track import TrackSettings
 
     camera = Camera.load(args.camera)
     colors = ColorClasses.load(args.colors) if args.colors else None
     layout = load_rig_views(args.rig) if args.rig else None
-    rigid = load_rig_rigid(args.rig) if args.rig else None
+    rigid = rigid_selection(load_rig_rigid(args.rig) if args.rig else None, colors or ColorClasses.default())
     mirrors = load_mirrors(args.mirrors) if args.mirrors else None
     known = None
     if args.known_length:
@@ -149,7 +149,7 @@ def _cmd_track(args) -> int:
         raise MirrorCapError("--face-distance must be a positive number of millimetres")
     if not args.conjecture_limit >= 0:
         raise MirrorCapError("--conjecture-limit must be a number of millimetres, 0 or more (or inf)")
-    settings = TrackSettings(conjecture_max_sd_mm=args.conjecture_limit / 3.0)
+    settings = TrackSettings.with_conjecture_limit(args.conjecture_limit)
     source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
                        colors=colors, layout=layout, mirrors=mirrors, known_length=known, start=start, end=end,

@@ -295,14 +295,20 @@ def load_rig_views(path) -> ViewLayout | None:
     for name, rect in views.items():
         if name not in VIEW_NAMES:
             raise InputError(f"rig file {path}: unknown view {name!r} (use {', '.join(VIEW_NAMES)})")
-        try:
-            x0, y0, x1, y1 = (float(v) for v in rect)
-        except (TypeError, ValueError):
-            raise InputError(f"rig file {path}: view {name!r} must be [x0, y0, x1, y1]") from None
-        if not (x1 > x0 and y1 > y0):
-            raise InputError(f"rig file {path}: view {name!r} is an empty rectangle")
-        regions[name] = (x0, y0, x1, y1)
+        regions[name] = rectangle(rect, f"rig file {path}: view {name!r}")
     return ViewLayout(regions=regions)
+
+
+def rectangle(values, what: str) -> tuple:
+    """``(x0, y0, x1, y1)`` floats from four numbers, ``x1 > x0`` and ``y1 > y0``; otherwise
+    an input error naming ``what``."""
+    try:
+        x0, y0, x1, y1 = (float(v) for v in values)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be [x0, y0, x1, y1]") from None
+    if not (x1 > x0 and y1 > y0):
+        raise InputError(f"{what} is an empty rectangle")
+    return x0, y0, x1, y1
 
 
 @dataclass
@@ -326,15 +332,8 @@ def load_rig_rigid(path) -> RigidMarkers | None:
     if not isinstance(entry, dict) or not ({"region", "colors"} & set(entry)) or set(entry) - {"region", "colors"}:
         raise InputError(f"rig file {path}: \"rigid\" must be {{\"region\": [x0, y0, x1, y1], \"colors\": [names]}} "
                          "(either or both)")
-    region = colors = None
-    if "region" in entry:
-        try:
-            x0, y0, x1, y1 = (float(v) for v in entry["region"])
-        except (TypeError, ValueError):
-            raise InputError(f"rig file {path}: rigid region must be [x0, y0, x1, y1]") from None
-        if not (x1 > x0 and y1 > y0):
-            raise InputError(f"rig file {path}: the rigid region is an empty rectangle")
-        region = (x0, y0, x1, y1)
+    region = rectangle(entry["region"], f"rig file {path}: the rigid region") if "region" in entry else None
+    colors = None
     if "colors" in entry:
         names = entry["colors"]
         if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):

@@ -348,6 +348,13 @@ def conjecture_gaps(motion, measured, gaps, neighbour_idx, ridge: float = 1.0, m
     return out, sd
 
 
+def grown_sd(sd, frames_away):
+    """A conjecture's expected error ``frames_away`` frames from the marker's nearest
+    measurement: the relations' standard deviation ``sd`` grown as a random walk,
+    ``sd * sqrt(frames)`` (at least one frame)."""
+    return np.asarray(sd, float) * np.sqrt(np.maximum(frames_away, 1))
+
+
 def conjecture_since_last_seen(motion, valid, neighbour_idx, neighbour_dist, last_motion, last_frame, history,
                                kc: float = 1.0):
     """A temporal refinement of eq. 5.8 for markers missing now but measured before:

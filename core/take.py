@@ -70,27 +70,22 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
               extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
               known_length=None, start: int = 0, end: int | None = None, step: int = 1,
               settings: TrackSettings | None = None, progress=None, track_progress=None,
-              face_distance_mm: float = FACE_DISTANCE_MM, rigid: RigidMarkers | None = None,
-              rigid_spec=None, rigid_source: str = "rig file") -> dict:
+              face_distance_mm: float = FACE_DISTANCE_MM, rigid=None, rigid_source: str = "rig file") -> dict:
     """Track ``source`` and write the take (C3D) and its report (JSON). ``progress(frames_read)``
     is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
-    ``rigid`` (RIG.json's ``"rigid"``) names the markers that carry the head pose (or
-    ``rigid_spec``, already as :func:`rigid_selection` gives it; ``rigid_source`` says where
-    it came from in the report)."""
+    ``rigid`` names the markers that carry the head pose, as :func:`rigid_selection` gives
+    them (``rigid_source`` says where they came from, for the report)."""
     from .detect import DetectionStream, _check_camera
 
     _check_camera(camera, source)
-    classes = colors or ColorClasses.default()
-    if rigid_spec is None:
-        rigid_spec = rigid_selection(rigid, classes)
     t0 = time.perf_counter()
-    stream = DetectionStream(source, classes, extraction or ExtractionSettings(), layout,
+    stream = DetectionStream(source, colors or ColorClasses.default(), extraction or ExtractionSettings(), layout,
                              start, end, step, progress)
     numbers, frames = collect_detections(stream)
     t_detect = time.perf_counter() - t0
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
-                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid_spec,
+                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
                             rigid_source=rigid_source)
 
 

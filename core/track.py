@@ -41,6 +41,7 @@ from .motion import (
     conjecture_motion,
     conjecture_since_last_seen,
     false_tracking,
+    grown_sd,
     neighbours,
     previous_and_next,
     rigid_fit,
@@ -69,6 +70,12 @@ class TrackSettings:
     rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
     min_measured_frames: int = 5  # a marker measured in fewer frames is not reported
     min_measured_fraction: float = 0.25  # ... nor one this rarely measured that is lost for good (see _keep_measured)
+
+    @classmethod
+    def with_conjecture_limit(cls, limit_mm: float, **kw) -> "TrackSettings":
+        """Settings whose conjectures are withheld where expected off by more than
+        ``limit_mm`` at 3 sigma (``--conjecture-limit``)."""
+        return cls(conjecture_max_sd_mm=limit_mm / 3.0, **kw)
 
 
 @dataclass
@@ -391,7 +398,7 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
         typical = np.nanmedian(sd[gaps]) if np.isfinite(sd[gaps]).any() else 0.2
         frames_off = np.minimum(np.where(last >= 0, np.arange(F)[:, None] - last, F),
                                 np.where(nxt < F, nxt - np.arange(F)[:, None], F))
-        expected = np.where(np.isnan(sd), typical, sd) * np.sqrt(np.maximum(frames_off, 1))
+        expected = grown_sd(np.where(np.isnan(sd), typical, sd), frames_off)
         withheld = gaps & (expected > max_sd_mm)
         result.points[withheld] = np.nan
         result.head_frame[withheld] = np.nan

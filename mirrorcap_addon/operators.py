@@ -160,23 +160,32 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
                 "shown as tracks of the clip's 'MirrorCap' object")
 
 
-def _unseen(op) -> str:
-    """bind_take's ``unseen`` from an operator's Conjecture / Drop Unseen Markers options."""
-    return "conjecture" if op.conjecture_unseen else "drop" if op.drop_unseen else "error"
+class _UnseenMarkers:
+    """The bind and bake operators' options for markers not seen in the neutral frame."""
+
+    drop_unseen: BoolProperty(name="Drop Unseen Markers", default=True,
+                              description="leave out markers not seen in the neutral frame (else refuse the take)")
+    conjecture_unseen: BoolProperty(name="Conjecture Unseen Markers", default=True,
+                                    description="place markers not seen in the neutral frame from their neighbours' "
+                                                "learned relations; those expected off by more than 2 mm are left "
+                                                "out (off: Drop Unseen Markers decides)")
+
+    def unseen(self) -> str:
+        """bind_take's ``unseen`` from the two options."""
+        return "conjecture" if self.conjecture_unseen else "drop" if self.drop_unseen else "error"
 
 
 def _rigid(s, classes):
     """The rigid markers for the tracker: the settings' region/colours if set, else RIG.json's
     ``"rigid"``, else None (automatic). Returns ``(spec for core.track, source name)``."""
-    from ..core.markers import RigidMarkers, load_rig_rigid
+    from ..core.markers import RigidMarkers, load_rig_rigid, rectangle
     from ..core.take import rigid_selection
 
     region = tuple(int(v) for v in s.rigid_region)
     names = tuple(n.strip() for n in s.rigid_colors.split(",") if n.strip())
     if any(region) or names:
-        if any(region) and not (region[2] > region[0] and region[3] > region[1]):
-            raise InputError(f"the rigid region {region} is an empty box: give x0, y0, x1, y1 with x1 > x0, y1 > y0")
-        rigid, source = RigidMarkers(region=region if any(region) else None, colors=names or None), "settings"
+        box = rectangle(region, f"the rigid region {region}") if any(region) else None
+        rigid, source = RigidMarkers(region=box, colors=names or None), "settings"
     else:
         rigid = load_rig_rigid(_path(s.rig, what="rig file")) if s.rig else None
         source = "rig file"
@@ -315,8 +324,8 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
 
             report = run_track(source, camera, take, report=_report_path(take), colors=colors, layout=layout,
                                mirrors=mirrors, start=s.frame_start, end=end,
-                               settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
-                               rigid_spec=rigid, rigid_source=rigid_source,
+                               settings=TrackSettings.with_conjecture_limit(s.conjecture_limit_mm),
+                               rigid=rigid, rigid_source=rigid_source,
                                progress=lambda k: progress(0.8 * k / max(n, 1), "finding markers"),
                                track_progress=progress.stage(0.8, 1.0, "tracking"))
             return take, report
@@ -360,7 +369,7 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
 
             report = track_detections(numbers, frames, camera, fps, take, report=_report_path(take),
                                       mirrors=mirrors, progress=progress.stage(0.0, 1.0, "tracking"),
-                                      settings=TrackSettings(conjecture_max_sd_mm=s.conjecture_limit_mm / 3.0),
+                                      settings=TrackSettings.with_conjecture_limit(s.conjecture_limit_mm),
                                       timings={"detect": 0.0}, rigid=rigid, rigid_source=rigid_source)
             return take, report
 
@@ -459,7 +468,7 @@ class MIRRORCAP_OT_fit_head(MirrorCapJobOperator):
                 f"(95 % under {fit.residual_p95_mm:.2f} mm), landmarks {fit.landmark_rms_mm:.2f} mm")
 
 
-class MIRRORCAP_OT_bind(MirrorCapOperator):
+class MIRRORCAP_OT_bind(_UnseenMarkers, MirrorCapOperator):
     """Register the take to the head and show which vertex each marker drives (vertex group mirrorcap_bound)"""
 
     bl_idname = "mirrorcap.bind"
@@ -468,12 +477,6 @@ class MIRRORCAP_OT_bind(MirrorCapOperator):
     take: StringProperty(name="Take", subtype="FILE_PATH")
     head_object: StringProperty(name="Head")
     neutral_frame: IntProperty(name="Neutral Frame", default=0, min=0)
-    drop_unseen: BoolProperty(name="Drop Unseen Markers", default=True,
-                              description="leave out markers not seen in the neutral frame (else refuse the take)")
-    conjecture_unseen: BoolProperty(name="Conjecture Unseen Markers", default=True,
-                                    description="place markers not seen in the neutral frame from their neighbours' "
-                                                "learned relations; those expected off by more than 2 mm are left "
-                                                "out (off: Drop Unseen Markers decides)")
 
     def run(self, context):
         from ..core.bind import bind_take
@@ -484,7 +487,7 @@ class MIRRORCAP_OT_bind(MirrorCapOperator):
         data = read_c3d(_need(_path(self.take, _settings(context).take, what="take"), "take (TAKE.c3d)"))
         head = read_head(obj)
         b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame,
-                      unseen=_unseen(self))
+                      unseen=self.unseen())
         group = obj.vertex_groups.get("mirrorcap_bound") or obj.vertex_groups.new(name="mirrorcap_bound")
         group.remove(list(range(len(obj.data.vertices))))
         group.add([int(v) for v in b.vertices], 1.0, "REPLACE")
@@ -496,7 +499,7 @@ class MIRRORCAP_OT_bind(MirrorCapOperator):
                 f"marker-to-vertex distance max {b.distance_mm.max():.2f} mm")
 
 
-class MIRRORCAP_OT_bake(MirrorCapJobOperator):
+class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
     """Bake a C3D take onto the head as shape keys (face rig: regions, jaw, inner lip, blinks)"""
 
     bl_idname = "mirrorcap.bake"
@@ -510,12 +513,6 @@ class MIRRORCAP_OT_bake(MirrorCapJobOperator):
     head_motion: BoolProperty(name="Head Motion", default=False, description="key the head motion on the object")
     blinks: BoolProperty(name="Blinks", default=True)
     blink_seed: IntProperty(name="Blink Seed", default=0)
-    drop_unseen: BoolProperty(name="Drop Unseen Markers", default=True,
-                              description="leave out markers not seen in the neutral frame (else refuse the take)")
-    conjecture_unseen: BoolProperty(name="Conjecture Unseen Markers", default=True,
-                                    description="place markers not seen in the neutral frame from their neighbours' "
-                                                "learned relations; those expected off by more than 2 mm are left "
-                                                "out (off: Drop Unseen Markers decides)")
 
     def prepare(self, context):
         from ..core.c3d import read_c3d
@@ -535,7 +532,7 @@ class MIRRORCAP_OT_bake(MirrorCapJobOperator):
 
             progress(0.05, "binding")
             binding = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame,
-                                unseen=_unseen(self))
+                                unseen=self.unseen())
             progress(0.2, "face rig")
             rig = FaceRig(head, binding.vertices, RigSettings(blinks=self.blinks, blink_seed=self.blink_seed))
             D = rig.deform(binding.displacements, fps=data["rate"])
