@@ -73,6 +73,45 @@ def test_batch_bakes_takes_in_parallel_and_reports_a_failing_one(demo, tmp_path)
         assert (tmp_path / "baked" / f"{g.stem}.blend").stat().st_size > 100_000
         assert json.loads((tmp_path / "baked" / f"{g.stem}.bake.json").read_text())["frames"] == 120
     assert not (tmp_path / "baked" / "broken.blend").exists()
+    # Blender's own messages go to the take's log, not into the batch's output
+    assert "Read blend" not in res.stdout + res.stderr
+    assert "Read blend" in (tmp_path / "baked" / "take_0.log").read_text()
+
+
+def bake_or_crash(job):
+    """A batch's per-take function that kills its process on takes named crash*, as a crash
+    inside Blender would (module level: the spawned workers import it by name)."""
+    from pathlib import Path
+
+    if Path(job[0]).stem.startswith("crash"):
+        print("crashing on purpose", flush=True)
+        os._exit(70)
+    from mirrorcap.cli import _bake_one
+
+    return _bake_one(job)
+
+
+def test_batch_goes_on_when_a_take_kills_its_worker(demo, tmp_path):
+    from mirrorcap.cli import run_batch
+
+    out, _ = demo
+    names = ["take_a", "crash_b", "take_c", "take_d"]
+    takes = [tmp_path / f"{n}.c3d" for n in names]
+    for t in takes:
+        t.write_bytes((out / "take.c3d").read_bytes())
+    options = {"object": None, "mode": "frames", "modes": 8, "neutral_frame": 0, "head_motion": False,
+               "no_blinks": False, "blink_seed": 0, "blink_interval": 2.5, "k": 16.0, "drop_unseen": True}
+    summary = run_batch(takes, out / "fitted_head.blend", tmp_path / "baked", workers=2, options=options, quiet=True,
+                        bake=bake_or_crash)
+    res = {r["take"]: r for r in summary["results"]}
+    crashed = res[str(takes[1])]
+    assert not crashed["ok"] and "worker process died (exit code 70)" in crashed["error"]
+    assert "crashing on purpose" in (tmp_path / "baked" / "crash_b.log").read_text()
+    assert [res[str(t)]["ok"] for t in takes] == [True, False, True, True]
+    assert summary["failed"] == 1 and summary["processes_started"] == 3    # one replacement worker
+    for n in ("take_a", "take_c", "take_d"):
+        assert (tmp_path / "baked" / f"{n}.blend").stat().st_size > 100_000
+    assert json.loads((tmp_path / "baked" / "batch.json").read_text())["failed"] == 1
 
 
 def test_scan_readers_agree_across_formats(tmp_path):
