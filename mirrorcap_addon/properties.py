@@ -58,14 +58,11 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
 class MirrorCapPreferences(bpy.types.AddonPreferences):
     bl_idname = ADDON_ID
 
-    workers: IntProperty(name="Batch Workers", default=2, min=1, max=64,
-                         description="parallel processes for `mirrorcap batch`")
     empty_size_mm: IntProperty(name="Marker Size (mm)", default=2, min=1, max=20,
                                description="display size of imported take markers")
 
     def draw(self, context):
         col = self.layout.column()
-        col.prop(self, "workers")
         col.prop(self, "empty_size_mm")
 
 

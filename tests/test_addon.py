@@ -62,7 +62,7 @@ def test_install_and_enable_like_a_user(built, tmp_path):
         "obj = bpy.context.active_object\n"
         "mod = sys.modules['bl_ext.user_default.mirrorcap.core']\n"
         "print('RESULT ' + json.dumps({'install': sorted(r), 'enabled': addon is not None, 'ops': ops,\n"
-        "    'panels': panels, 'workers': addon.preferences.workers if addon else None,\n"
+        "    'panels': panels, 'marker_size': addon.preferences.empty_size_mm if addon else None,\n"
         "    'head': sorted(head), 'vertices': len(obj.data.vertices), 'keys': len(obj.data.shape_keys.key_blocks),\n"
         "    'core_from': mod.__file__, 'scene_settings': hasattr(bpy.context.scene, 'mirrorcap')}))\n"
     )
@@ -72,7 +72,7 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     assert out["install"] == ["FINISHED"] and out["enabled"]
     assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 12
     assert len(out["panels"]) == 5
-    assert out["workers"] == 2                       # AddonPreferences.bl_idname is the extension's package
+    assert out["marker_size"] == 2                   # AddonPreferences.bl_idname is the extension's package
     assert out["head"] == ["FINISHED"] and out["vertices"] == 4608 and out["keys"] == 53
     assert str(tmp_path / "user") in out["core_from"]
     assert out["scene_settings"]
