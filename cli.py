@@ -122,12 +122,18 @@ def _batch_worker(tasks, events, bake) -> None:
     """A batch worker process: bake the takes it is handed until told to stop. It says which
     take it starts before baking it (``events`` is its own pipe: a send is written at once),
     so a take that kills its process is known."""
+    import os
     from pathlib import Path
 
     while True:
         job = tasks.get()
         if job is None:
-            return
+            # Every take's files are written and closed: leave without Blender's teardown at
+            # interpreter exit (0.1-0.2 s per worker, paid at the end of every batch).
+            sys.stdout.flush()
+            sys.stderr.flush()
+            events.close()
+            os._exit(0)
         index, job = job
         log = Path(job[2]) / f"{Path(job[0]).stem}.log"
         events.send(("start", index))

@@ -28,8 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-
-import numpy as np
 from pathlib import Path
 
 from . import __version__
@@ -127,6 +125,8 @@ def _cmd_detect(args) -> int:
 
 
 def _cmd_track(args) -> int:
+    import numpy as np
+
     from .boardcal import load_mirrors
     from .camera import Camera
     from .markers import ColorClasses, load_rig_rigid, load_rig_views
