@@ -123,8 +123,11 @@ def _batch_worker(tasks, events, bake) -> None:
     take it starts before baking it (``events`` is its own pipe: a send is written at once),
     so a take that kills its process is known."""
     import os
+    import signal
     from pathlib import Path
 
+    # Ctrl-C reaches the whole process group: the batch command stops its workers itself
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         job = tasks.get()
         if job is None:
@@ -234,6 +237,7 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
         except EOFError:            # the worker is gone; its sentinel says how
             pass
 
+    finished = False
     try:
         for _ in range(n_proc):
             start_worker()
@@ -256,10 +260,12 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
             if i not in results:
                 record(i, {"take": jobs[i][0], "ok": False, "seconds": None,
                            "error": "not baked: every worker process stopped"})
+        finished = True
     finally:
         for proc, reader, _ in workers_now.values():
-            proc.join(timeout=10)
-            if proc.is_alive():
+            if finished:        # the workers leave once their stop signal is read
+                proc.join(timeout=10)
+            if proc.is_alive():     # interrupted (Ctrl-C) or stuck: stop them now
                 proc.terminate()
                 proc.join()
             reader.close()

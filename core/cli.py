@@ -342,6 +342,9 @@ def main(argv=None, extra_commands=None) -> int:
     except MirrorCapError as exc:
         print(f"mirrorcap: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:       # outputs are written atomically: nothing half-written is left
+        print("mirrorcap: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

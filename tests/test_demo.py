@@ -114,6 +114,34 @@ def test_batch_goes_on_when_a_take_kills_its_worker(demo, tmp_path):
     assert json.loads((tmp_path / "baked" / "batch.json").read_text())["failed"] == 1
 
 
+def test_batch_stops_cleanly_on_ctrl_c(demo, tmp_path):
+    import signal
+    import time
+
+    out, _ = demo
+    takes = [tmp_path / f"take_{i}.c3d" for i in range(6)]
+    for t in takes:
+        t.write_bytes((out / "take.c3d").read_bytes())
+    proc = subprocess.Popen([sys.executable, "-m", "mirrorcap", "batch", *map(str, takes), "--head",
+                             str(out / "fitted_head.blend"), "--out", str(tmp_path / "baked"), "--workers", "2",
+                             "--drop-unseen"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    time.sleep(0.5)                                  # the workers are starting Blender
+    os.killpg(proc.pid, signal.SIGINT)               # Ctrl-C in a terminal reaches the whole group
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stdout + stderr
+    assert stderr.strip() == "mirrorcap: interrupted"          # no traceback, from the command or a worker
+    alive = None
+    for _ in range(50):                              # every worker is gone (zombies wait for init)
+        ps = subprocess.run(["ps", "-o", "pid=,stat=", "-g", str(proc.pid)], capture_output=True, text=True)
+        alive = [ln for ln in ps.stdout.splitlines() if ln.split()[1][0] != "Z"]
+        if not alive:
+            break
+        time.sleep(0.1)
+    assert not alive
+    assert not list((tmp_path / "baked").glob("*.tmp*"))
+
+
 def test_scan_readers_agree_across_formats(tmp_path):
     V, T = read_scan(ROOT / "sample_scenes" / "rig_clip" / "scan.ply")
     assert V.shape[1] == 3 and T.shape[1] == 3 and T.max() < len(V)
