@@ -246,8 +246,9 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
             for entry in list(workers_now.values()):
                 read_messages(entry)
             for sentinel in [s for s in ready if s in workers_now]:
-                proc, reader, index = workers_now.pop(sentinel)
-                read_messages([proc, reader, index])
+                entry = workers_now.pop(sentinel)
+                read_messages(entry)            # what it said before it went
+                proc, reader, index = entry
                 proc.join()
                 reader.close()
                 if index is not None and index not in results:
