@@ -567,21 +567,27 @@ def _add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettin
             np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
 
 
+def _frame_spaced(points, frame, within: float, *extent) -> np.ndarray:
+    """``points`` ``(M, D)`` with the ``frame`` number ``(M,)`` as one more coordinate, in
+    steps far larger than ``within`` and than any coordinate of ``points`` or of the other
+    arrays in ``extent``: a KD-tree over such points pairs only points of the frames meant."""
+    spacing = 10.0 * (sum(np.abs(a).max() for a in (points, *extent)) + within + 1.0)
+    return np.c_[points, np.asarray(frame) * spacing]
+
+
 def _pairs_frames_apart(points, frame, within: float, max_gap: int) -> np.ndarray:
     """Pairs ``(P, 2)`` of ``points`` ``(M, D)`` within ``within`` of each other whose
     ``frame`` numbers are 1 to ``max_gap`` apart (earlier first). Per gap one KD-tree
-    query against the points shifted by the gap, the frame as a coordinate far larger
-    than ``within``: a blob that sits still over the take gives pairs with the few
-    frames next to it, not with all of them."""
+    query against the points shifted by the gap (:func:`_frame_spaced`): a blob that sits
+    still over the take gives pairs with the few frames next to it, not with all of them."""
     from scipy.spatial import cKDTree
 
     if len(points) == 0:
         return np.zeros((0, 2), int)
-    spacing = 10.0 * (np.abs(points).max() + within + 1.0)
-    tree = cKDTree(np.c_[points, frame * spacing])
+    tree = cKDTree(_frame_spaced(points, frame, within))
     out = []
     for gap in range(1, max_gap + 1):
-        later = cKDTree(np.c_[points, (frame - gap) * spacing])
+        later = cKDTree(_frame_spaced(points, frame - gap, within))
         pairs = tree.sparse_distance_matrix(later, within, output_type="ndarray")
         out.append(np.c_[pairs["i"], pairs["j"]])
     return np.concatenate(out).astype(int)
@@ -590,18 +596,17 @@ def _pairs_frames_apart(points, frame, within: float, max_gap: int) -> np.ndarra
 def _nearest_same_frame(tracked, frame, query, within: float) -> np.ndarray:
     """Distance from each ``query`` point ``(M, D)`` to the nearest of the ``tracked``
     points ``(F, N, D)`` (NaN: not tracked) of its own ``frame`` ``(M,)``; ``inf`` where
-    none lies within ``within``. One KD-tree over every frame, the frame number as an
-    extra coordinate far larger than any distance asked for."""
+    none lies within ``within``. One KD-tree over every frame (:func:`_frame_spaced`)."""
     from scipy.spatial import cKDTree
 
     F, N, D = tracked.shape
     ok = np.isfinite(tracked).all(axis=2)
     if not ok.any() or len(query) == 0:
         return np.full(len(query), np.inf)
-    spacing = 10.0 * (np.abs(tracked[ok]).max() + np.abs(query).max() + within + 1.0)
     frames = np.broadcast_to(np.arange(F)[:, None], (F, N))
-    tree = cKDTree(np.c_[tracked[ok], frames[ok] * spacing])
-    dist, _ = tree.query(np.c_[query, frame * spacing], distance_upper_bound=within * (1 + 1e-9) + 1e-12)
+    tree = cKDTree(_frame_spaced(tracked[ok], frames[ok], within, query))
+    dist, _ = tree.query(_frame_spaced(query, frame, within, tracked[ok]),
+                         distance_upper_bound=within * (1 + 1e-9) + 1e-12)
     return dist
 
 

@@ -189,11 +189,12 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     timings["save"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
 
+    withheld = int(sum(report["per_frame"].get("withheld", [])))  # conjectures left as gaps
     summary = {
         "clip": {"frames": int(source.frame_count), "fps": fps, "size": list(source.size)},
         "tracking": {**{k: v for k, v in score.items() if k not in ("ids", "aligned", "error_mm")},
-                     "withheld": int(sum(report["per_frame"].get("withheld", []))),
-                     "withheld_fraction": float(sum(report["per_frame"].get("withheld", [])) / max(score["aligned"].shape[0] * score["aligned"].shape[1], 1))},
+                     "withheld": withheld, "withheld_fraction": withheld / max(score["aligned"].shape[0]
+                                                                                 * score["aligned"].shape[1], 1)},
         "tracking_report": {"units": report["units"], "mirrors": report["mirrors"],
                             "tracking_frames_per_s": report["timings_s"]["tracking_frames_per_s"]},
         "fit": {"residual_to_scan_rms_mm": fit.residual_rms_mm, "landmark_rms_mm": fit.landmark_rms_mm,
@@ -255,7 +256,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
         ("measurements of the right marker more than 2 px off", score["off_marker"]),
         ("conjectured points (RMS / max error)", f"{score['conjectured']} ({score['conjectured_rms_mm']:.2f} / "
                                                   f"{score['conjectured_max_mm']:.2f} mm)"),
-        ("conjectures withheld (expected error over the limit: left as gaps)", sum(report["per_frame"]["withheld"])),
+        ("conjectures withheld (expected error over the limit: left as gaps)", withheld),
         ("head fit: residual to the scan / error to the true face",
          f"{fit.residual_rms_mm:.2f} / {summary['fit']['error_to_true_face_rms_mm']:.2f} mm RMS"),
         ("bind: registration residual", f"{binding.landmark_rms_mm:.2f} mm ({binding.registration})"),
