@@ -2,23 +2,24 @@
 ``mirrorcap`` Python package.
 
 Importing this package never imports ``bpy``: Blender calls :func:`register`,
-which loads the Blender layer (``mirrorcap_addon``) only then. Outside Blender,
-``mirrorcap.core`` is the numerical core and ``python -m mirrorcap`` the CLI.
+which loads the Blender layer (:mod:`.addon`) only then. Outside Blender,
+``mirrorcap.core`` is the numerical core and ``python -m mirrorcap`` the command line
+(:mod:`.cli`). ``docs/architecture.md`` shows how the packages fit together.
 """
 
 from .core import __version__
 
 
 def register():
-    from . import mirrorcap_addon
+    from . import addon
 
-    mirrorcap_addon.register()
+    addon.register()
 
 
 def unregister():
-    from . import mirrorcap_addon
+    from . import addon
 
-    mirrorcap_addon.unregister()
+    addon.unregister()
 
 
 __all__ = ["__version__", "register", "unregister"]

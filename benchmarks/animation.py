@@ -26,7 +26,7 @@ HEAD = ROOT / "sample_scenes" / "generic_head"
 
 
 def _face_mask(head):
-    from core.head import REGIONS
+    from mirrorcap.core.face.head import REGIONS
 
     face = np.zeros(len(head.vertices), bool)
     for r in REGIONS:
@@ -35,15 +35,15 @@ def _face_mask(head):
 
 
 def run_animation_benchmark(repeats: int = 3) -> dict:
-    from core.bind import bind_take
-    from core.c3d import write_c3d
-    from core.facerig import FaceRig, RigSettings
-    from core.headfit import fit_head, subdivide
-    from core.headio import load_head_npz
-    from core.headsim import SINGLE_UNITS, performance, synthetic_take
-    from core.motion import rotation_zyx
-    from core.rbf import RBFScattering
-    from core.shapes import pca_error_table
+    from mirrorcap.core.face.bind import bind_take
+    from mirrorcap.core.take.c3d import write_c3d
+    from mirrorcap.core.face.facerig import FaceRig, RigSettings
+    from mirrorcap.core.face.headfit import fit_head, subdivide
+    from mirrorcap.core.face.headio import load_head_npz
+    from mirrorcap.synthetic.headsim import SINGLE_UNITS, performance, synthetic_take
+    from mirrorcap.core.geometry.rigid import rotation_zyx
+    from mirrorcap.core.face.rbf import RBFScattering
+    from mirrorcap.core.face.shapes import pca_error_table
 
     head, keys = load_head_npz(HEAD / "head.npz", with_shape_keys=True)
     out = {"head": {"vertices": int(len(head.vertices)), "shape_keys": len(keys)}}

@@ -19,7 +19,7 @@ import numpy as np
 
 
 def _loop_take(src: Path, dst: Path, frames: int) -> None:
-    from core.c3d import read_c3d, write_c3d
+    from mirrorcap.core.take.c3d import read_c3d, write_c3d
 
     d = read_c3d(src)
     reps = -(-frames // d["points"].shape[0])
@@ -41,7 +41,7 @@ def _run_batch(copies: int, repeats: int, frames_override) -> dict:
     with tempfile.TemporaryDirectory(prefix="mirrorcap-batch-") as tmp:
         tmp = Path(tmp)
         demo = tmp / "demo"
-        res = subprocess.run([sys.executable, "-c", "from mirrorcap.mirrorcap_addon.demo import run_demo; "
+        res = subprocess.run([sys.executable, "-c", "from mirrorcap.demo.rig import run_demo; "
                               f"run_demo({str(demo)!r}, quiet=True, preview=False)"],
                              capture_output=True, text=True, cwd=root)
         if res.returncode != 0:

@@ -15,9 +15,10 @@ import time
 
 import numpy as np
 
-from core.markers import ColorClasses, ExtractionSettings, MarkerExtractor, split_views_by_gaps
-from core.render import RenderSettings, match_detections, render_rig_frame, rig_clip_frames
-from core.simulate import face_rig
+from mirrorcap.core.capture.markers import ColorClasses, ExtractionSettings, MarkerExtractor
+from mirrorcap.core.capture.rig import split_views_by_gaps
+from mirrorcap.synthetic.render import RenderSettings, match_detections, render_rig_frame, rig_clip_frames
+from mirrorcap.synthetic.simulate import face_rig
 
 CONDITIONS = {
     "clean (noise 1)": RenderSettings(noise_sigma=1.0),
@@ -39,7 +40,7 @@ def evaluate_extraction(rig, settings: RenderSettings, seeds=(1, 2, 3), extracti
     """Render frames of ``rig`` with ``settings``, extract, split views and match
     against the truth (2 px). Returns centre RMS error (px), mean error, colour-class
     accuracy, missed rate (of visible dots) and false rate (of detections)."""
-    from core.markers import DEFAULT_CLASSES
+    from mirrorcap.core.capture.markers import DEFAULT_CLASSES
 
     class_rgb = np.array([s[0] for s in DEFAULT_CLASSES.values()]) if class_rgb is None else class_rgb
     ex = MarkerExtractor(ColorClasses.default(), extraction)
@@ -77,8 +78,8 @@ def _rss_mb() -> float:
 def run_extraction_benchmark(stream_frames: int = 10000, progress=print) -> dict:
     import cv2
 
-    from core.detect import run_detection
-    from core.video import open_source
+    from mirrorcap.core.capture.detect import run_detection
+    from mirrorcap.core.capture.video import open_source
 
     cv2.setNumThreads(1)
     rig = rig_300()
@@ -128,7 +129,7 @@ def run_extraction_benchmark(stream_frames: int = 10000, progress=print) -> dict
         thread = threading.Thread(target=sample, daemon=True)
         thread.start()
         t0 = time.perf_counter()
-        report = run_detection(source, os.path.join(tmp, "det.csv"), progress=False)
+        report = run_detection(source, os.path.join(tmp, "det.csv"), progress=None)
         elapsed = time.perf_counter() - t0
         stop.set()
         thread.join()

@@ -30,7 +30,7 @@ import sys
 import time
 from pathlib import Path
 
-from core.atomic import write_files_atomically
+from mirrorcap.core.common.files import write_files_atomically
 
 from .animation import animation_summary, run_animation_benchmark
 from .batch import batch_summary, run_batch_benchmark

@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from core import mirror as mr
-from core import simulate as sim
-from core.camera import Camera
+from mirrorcap.core.geometry import refine
+from mirrorcap.core.geometry import mirror as mr
+from mirrorcap.synthetic import simulate as sim
+from mirrorcap.core.geometry.camera import Camera
 
 from .baselines import flip_mirror_view, opencv_two_view, rms_3d_error, two_view_linear, two_view_ml
 
@@ -83,7 +84,7 @@ def run_trial(experiment: str, setting_index: int, trial: int, methods=METHODS) 
     X = mr.points_from_planes(p, pm[None], u[None], np.array([-1.0]))
     out["mirror"] = rms_3d_error(X, pts)
     if "mirror_ml" in methods:
-        ref = mr.refine_reconstruction(p, pm[None], np.ones((1, n), bool), u[None], np.array([-1.0]), X,
+        ref = refine.refine_reconstruction(p, pm[None], np.ones((1, n), bool), u[None], np.array([-1.0]), X,
                                        focal_px=FOCAL / pitch)
         out["mirror_ml"] = rms_3d_error(ref.points, pts)
     p2 = flip_mirror_view(pm)

@@ -13,9 +13,10 @@ import time
 
 import numpy as np
 
-from core import mirror as mr
-from core import simulate as sim
-from core.camera import Camera
+from mirrorcap.core.geometry import epipolar
+from mirrorcap.core.geometry import mirror as mr
+from mirrorcap.synthetic import simulate as sim
+from mirrorcap.core.geometry.camera import Camera
 
 
 def _times(fn, repeat: int, inner: int = 1) -> tuple[float, float]:
@@ -64,7 +65,7 @@ def run_speed(n_points: int = 300, repeat: int = 200) -> dict:
         "plane_pixels_ransac_clean": lambda: mr.estimate_mirror_plane(direct, mirrored[0], camera),
         "plane_pixels_ransac_30pct_wrong": lambda: mr.estimate_mirror_plane(direct, mirrored_bad, camera),
         "expected_normal_error": lambda: mr.expected_normal_error(p, pm, normal, 0.2 / 1400),
-        "mirrored_epipolar_band_300x300": lambda: mr.in_mirrored_epipolar_band(direct, mirrored[0], camera, plane),
+        "mirrored_epipolar_band_300x300": lambda: epipolar.in_mirrored_epipolar_band(direct, mirrored[0], camera, plane),
     }
     slow = {"plane_pixels_ransac_clean", "plane_pixels_ransac_30pct_wrong", "plane_pixels_closed_form",
             "expected_normal_error", "mirrored_epipolar_band_300x300", "reconstruct_pixels_with_distortion"}

@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 
-from core.simulate import face_rig, rig_performance, synthetic_detections
-from core.track import track
+from mirrorcap.synthetic.simulate import face_rig, rig_performance, synthetic_detections
+from mirrorcap.core.track.tracker import track
 
 SCENARIOS = {
     "clean": dict(noise_px=0.05),
@@ -109,9 +109,9 @@ def render_performance_mp4(path, n_frames: int, fps: float = 60.0, seed: int = 1
     ``(rig, truth points (F, N, 3))``."""
     import cv2
 
-    from core.markers import DEFAULT_CLASSES
-    from core.render import RenderSettings, render_rig_frame
-    from core.simulate import visibility
+    from mirrorcap.core.capture.markers import DEFAULT_CLASSES
+    from mirrorcap.synthetic.render import RenderSettings, render_rig_frame
+    from mirrorcap.synthetic.simulate import visibility
 
     rig = face_rig(n_markers=300, seed=3, layout="even")
     pts, nrm, *_ = rig_performance(rig, n_frames, head_motion_deg=10, expression_mm=5)
@@ -138,10 +138,10 @@ def run_track_command_benchmark(n_frames: int = 600, repeats: int = 3, progress=
     import tempfile
     from pathlib import Path
 
-    from core.c3d import read_c3d
-    from core.evaluate import score_take
-    from core.take import run_track
-    from core.video import open_source
+    from mirrorcap.core.take.c3d import read_c3d
+    from mirrorcap.synthetic.evaluate import score_take
+    from mirrorcap.core.track.pipeline import run_track
+    from mirrorcap.core.capture.video import open_source
 
     with tempfile.TemporaryDirectory() as tmp:
         video = Path(tmp) / "performance.mp4"

@@ -1,18 +1,26 @@
 """MirrorCap's numerical core: pure numpy / scipy / OpenCV, never ``bpy``.
 
-One module per pipeline stage (data flows one way):
+One subpackage per pipeline stage; data flows one way, and a stage imports only the
+stages below it (``make test`` checks this with import-linter, contracts in
+``pyproject.toml``):
 
-* :mod:`core.video` -- rig video / image sequences, streamed frame by frame.
-* :mod:`core.calibrate` -- camera calibration from a chessboard or ChArUco board.
-* :mod:`core.markers` -- marker extraction (Lin 2003, section 5.2) and the view split.
-* :mod:`core.detect` -- video -> DETECTIONS.csv; learning colour classes.
-* :mod:`core.camera` -- the OpenCV camera; pixels -> normalised coordinates.
-* :mod:`core.mirror` -- mirror planes and 3D points (Lin 2003, ch. 3; eq. 5.1-5.3).
-* :mod:`core.pairs` -- PAIRS.csv / POINTS.csv.
-* :mod:`core.reconstruct` -- one frame of pairs -> planes + points (``mirrorcap reconstruct``).
-* :mod:`core.simulate` -- synthetic rigs with exact truth (a test tool).
-* :mod:`core.render` -- synthetic rig frames and calibration boards with truth (a test tool).
-* :mod:`core.cli` -- the ``mirrorcap`` command line.
+* :mod:`.common`   -- errors, atomic files, the message log and progress.
+* :mod:`.geometry` -- the camera, rigid fits, mirror planes, triangulation, the
+  mirrored epipolar band; one frame of correspondences -> planes + 3D points.
+* :mod:`.capture`  -- rig video, camera calibration, the rig file, marker extraction
+  (UV), detections, mirror planes from a board.
+* :mod:`.take`     -- take files: C3D, PAIRS.csv and POINTS.csv.
+* :mod:`.track`    -- detections over time -> a labelled 3D take with head motion
+  separated (self-calibration, pairing, candidates, motion filters, the tracker);
+  video -> TAKE.c3d + REPORT.json.
+* :mod:`.face`     -- the head model, the scan fit, RBF, the face rig, binding a take,
+  PCA; one take -> per-frame vertex displacements pipeline.
+
+``docs/architecture.md`` draws the data flow and says where a new stage goes.
 """
+
+if __name__ == "core":  # pragma: no cover - a guard against a second import name
+    raise ImportError("import the core as mirrorcap.core (python -m mirrorcap, or the installed package), "
+                      "not as a top-level 'core'")
 
 __version__ = "0.1.0"

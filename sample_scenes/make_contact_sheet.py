@@ -26,9 +26,9 @@ SIZE = 360
 
 
 def main() -> int:
-    from mirrorcap.core.c3d import write_c3d
-    from mirrorcap.core.headio import load_head_npz
-    from mirrorcap.core.headsim import synthetic_take
+    from mirrorcap.core.take.c3d import write_c3d
+    from mirrorcap.core.face.headio import load_head_npz
+    from mirrorcap.synthetic.headsim import synthetic_take
 
     head, keys = load_head_npz(HEAD / "head.npz", with_shape_keys=True)
     labels, pts, verts, disp, pose = synthetic_take(head, keys, n_markers=150, n_frames=120, seed=21)
@@ -98,7 +98,7 @@ def main() -> int:
     sheet = np.vstack([np.hstack(tiles[:3]), np.hstack(tiles[3:6])])
     OUT.parent.mkdir(exist_ok=True)
     ok, buf = cv2.imencode(".png", sheet)
-    from mirrorcap.core.atomic import write_files_atomically
+    from mirrorcap.core.common.files import write_files_atomically
 
     write_files_atomically({OUT: buf.tobytes()})
     print(f"wrote {OUT} (frames {[p + 1 for p in picks]})")

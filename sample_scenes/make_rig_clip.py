@@ -44,13 +44,13 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
-from core.atomic import write_files_atomically  # noqa: E402
-from core.camera import Camera  # noqa: E402
-from core.head import HeadModel  # noqa: E402
-from core.headfit import subdivide  # noqa: E402
-from core.headio import load_head_npz  # noqa: E402
-from core.headsim import head_motion, performance, place_markers  # noqa: E402
-from core.simulate import mirror_plane_from_angles  # noqa: E402
+from mirrorcap.core.common.files import write_files_atomically  # noqa: E402
+from mirrorcap.core.geometry.camera import Camera  # noqa: E402
+from mirrorcap.core.face.head import HeadModel  # noqa: E402
+from mirrorcap.core.face.headfit import subdivide  # noqa: E402
+from mirrorcap.core.face.headio import load_head_npz  # noqa: E402
+from mirrorcap.synthetic.headsim import head_motion, performance, place_markers  # noqa: E402
+from mirrorcap.synthetic.simulate import mirror_plane_from_angles  # noqa: E402
 
 OUT = HERE / "rig_clip"
 CACHE = HERE / ".cache" / "rig_clip_frames"
@@ -118,7 +118,7 @@ def ply_bytes(V, T) -> bytes:
 
 
 def build_scene(bpy, head: HeadModel, subject, marker_colors):
-    from mirrorcap.mirrorcap_addon.frames import core_to_blender
+    from mirrorcap.addon.common.frames import core_to_blender
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
@@ -263,8 +263,8 @@ def main(argv=None) -> int:
 
     import bpy
 
-    from mirrorcap.mirrorcap_addon.frames import core_to_blender
-    from mirrorcap.mirrorcap_addon.video_out import h264_output
+    from mirrorcap.addon.common.frames import core_to_blender
+    from mirrorcap.addon.common.video_out import h264_output
 
     head, keys = load_head_npz(ROOT / "sample_scenes" / "generic_head" / "head.npz", with_shape_keys=True)
     rng = np.random.default_rng(args.seed)

@@ -12,8 +12,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from core import simulate as sim  # noqa: E402
-from core.camera import Camera  # noqa: E402
+from mirrorcap.synthetic import simulate as sim  # noqa: E402
+from mirrorcap.core.geometry.camera import Camera  # noqa: E402
 
 SAMPLE = ROOT / "sample_scenes" / "mirror_demo"
 
@@ -52,7 +52,7 @@ def write_rig_clip(root: Path, n_frames: int, name: str = "{:03d}.png", mp4=None
 
     import cv2
 
-    from core.render import RenderSettings, rig_clip_frames
+    from mirrorcap.synthetic.render import RenderSettings, rig_clip_frames
 
     rig = sim.face_rig(n_markers=300, seed=3, layout="even")
     (root / "png").mkdir()

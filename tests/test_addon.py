@@ -22,7 +22,8 @@ import pytest
 from conftest import ROOT
 
 SAMPLE = ROOT / "sample_scenes" / "rig_clip"
-OPERATOR_IDS = sorted(re.findall(r'bl_idname = "mirrorcap\.(\w+)"', (ROOT / "mirrorcap_addon" / "operators.py").read_text()))
+OPERATOR_IDS = sorted(i for path in (ROOT / "addon").rglob("*.py")
+                      for i in re.findall(r'bl_idname = "mirrorcap\.(\w+)"', path.read_text()))
 
 
 def _run(args, env=None, timeout=900):
@@ -45,7 +46,9 @@ def test_extension_builds_one_zip_per_platform_with_its_wheels(built):
     assert len(wheels) == 2 and all("manylinux" in w for w in wheels)
     assert any(w.startswith("wheels/scipy-") for w in wheels) and any("opencv" in w for w in wheels)
     assert not any("numpy" in n for n in names)
-    assert "sample_scenes/generic_head/head.npz" in names and "core/track.py" in names
+    assert "sample_scenes/generic_head/head.npz" in names and "core/track/tracker.py" in names
+    # the synthetic tools, the demo and the command line stay out of the product
+    assert not any(n.startswith(("synthetic/", "demo/", "cli/")) for n in names)
     assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "sample_scenes/rig_clip", "docs/")) for n in names)
 
 
@@ -61,10 +64,17 @@ def test_install_and_enable_like_a_user(built, tmp_path):
         "head = bpy.ops.mirrorcap.add_generic_head()\n"
         "obj = bpy.context.active_object\n"
         "mod = sys.modules['bl_ext.user_default.mirrorcap.core']\n"
+        "import numpy as np\n"
+        "n = len(obj.data.vertices); rest = np.empty(3 * n); obj.data.vertices.foreach_get('co', rest)\n"
+        "ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()\n"
+        "seen = np.empty(3 * n); ev.vertices.foreach_get('co', seen)\n"
+        "shown_mm = float(np.abs(seen - rest).max() * 1000)\n"
+        "values = [kb.value for kb in obj.data.shape_keys.key_blocks[1:]]\n"
         "print('RESULT ' + json.dumps({'install': sorted(r), 'enabled': addon is not None, 'ops': ops,\n"
         "    'panels': panels, 'marker_size': addon.preferences.empty_size_mm if addon else None,\n"
         "    'head': sorted(head), 'vertices': len(obj.data.vertices), 'keys': len(obj.data.shape_keys.key_blocks),\n"
-        "    'core_from': mod.__file__, 'scene_settings': hasattr(bpy.context.scene, 'mirrorcap')}))\n"
+        "    'core_from': mod.__file__, 'scene_settings': hasattr(bpy.context.scene, 'mirrorcap'),\n"
+        "    'shown_off_rest_mm': shown_mm, 'key_values': sorted(set(values))}))\n"
     )
     res = _run(["-c", code], env={"BLENDER_USER_RESOURCES": str(tmp_path / "user")})
     assert res.returncode == 0, res.stdout + res.stderr
@@ -74,6 +84,8 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     assert len(out["panels"]) == 5
     assert out["marker_size"] == 2                   # AddonPreferences.bl_idname is the extension's package
     assert out["head"] == ["FINISHED"] and out["vertices"] == 4608 and out["keys"] == 53
+    # the head a user adds shows its rest shape: every expression key at 0 (evaluated mesh)
+    assert out["key_values"] == [0.0] and out["shown_off_rest_mm"] < 1e-6
     assert str(tmp_path / "user") in out["core_from"]
     assert out["scene_settings"]
     site = tmp_path / "user" / "extensions" / ".local" / "lib" / "python3.11" / "site-packages"

@@ -13,10 +13,10 @@ import pytest
 
 from conftest import ROOT
 
-from core.bind import bind_take
-from core.c3d import write_c3d
-from core.headio import load_head_npz
-from core.headsim import performance, synthetic_take
+from mirrorcap.core.face.bind import bind_take
+from mirrorcap.core.take.c3d import write_c3d
+from mirrorcap.core.face.headio import load_head_npz
+from mirrorcap.synthetic.headsim import performance, synthetic_take
 
 HEAD_BLEND = ROOT / "sample_scenes" / "generic_head" / "head.blend"
 HEAD_NPZ = ROOT / "sample_scenes" / "generic_head" / "head.npz"
@@ -74,6 +74,11 @@ def test_bake_frames_bound_vertices_follow_their_markers(tmp_path, head_and_keys
     # and the performance's truth, where no gap was filled
     ok = ~binding.filled
     assert np.linalg.norm(baked[:, verts] - disp[:, verts], axis=2)[ok].max() < 0.01
+    # what a user sees: the evaluated mesh at every keyed frame (every other shape key of the head at 0)
+    seen = _to_core(rb["evaluated"]) - basis[None]
+    assert np.linalg.norm(seen[:, binding.vertices] - binding.displacements, axis=2).max() < 0.05
+    assert np.linalg.norm(seen[:, verts] - disp[:, verts], axis=2)[ok].max() < 0.01
+    assert np.linalg.norm(seen - baked, axis=2).max() < 0.01
 
 
 def test_bake_pca_reproduces_a_faceunit_performance_with_eight_modes(tmp_path, head_and_keys):
@@ -82,8 +87,8 @@ def test_bake_pca_reproduces_a_faceunit_performance_with_eight_modes(tmp_path, h
     np.save(tmp_path / "perf.npy", D)
     code = (
         "import sys, json, numpy as np, bpy\n"
-        "from mirrorcap.mirrorcap_addon.headio import open_blend, find_head_object, read_head, save_blend_atomically\n"
-        "from mirrorcap.mirrorcap_addon.bake import bake_displacements\n"
+        "from mirrorcap.addon.common.headio import open_blend, find_head_object, read_head, save_blend_atomically\n"
+        "from mirrorcap.addon.bake.bake import bake_displacements\n"
         f"open_blend({str(HEAD_BLEND)!r})\n"
         "obj = find_head_object(None)\n"
         "head = read_head(obj)\n"
@@ -99,6 +104,7 @@ def test_bake_pca_reproduces_a_faceunit_performance_with_eight_modes(tmp_path, h
     basis = _to_core(rb["basis"])
     modes = _to_core(rb["keys"]) - basis[None]
     rec = np.einsum("fk,kvd->fvd", rb["values"], modes)
+    assert np.linalg.norm(_to_core(rb["evaluated"]) - basis[None] - rec, axis=2).max() < 0.01  # what a user sees
     err = np.linalg.norm(rec - D, axis=2)
     assert err.max() < 0.5
     assert err.max() > 0 or np.abs(D).max() == 0
@@ -197,3 +203,22 @@ def test_bake_places_markers_first_seen_later_with_conjecture_unseen(tmp_path, h
     assert sorted(report["markers_neutral_conjectured"]) == sorted(labels[i] for i in late)
     assert report["markers"] == 120 and report["markers_dropped_unseen"] == []
     assert not (tmp_path / "no.blend").exists()
+
+
+def test_shipped_generic_head_shows_its_rest_shape(tmp_path):
+    """sample_scenes/generic_head/head.blend as Blender shows it: its 52 expression keys at 0,
+    so the evaluated mesh is the rest shape (Blender 5.0 leaves a new key at 1.0)."""
+    code = (
+        "import bpy, numpy as np\n"
+        f"bpy.ops.wm.open_mainfile(filepath={str(HEAD_BLEND)!r})\n"
+        "obj = bpy.data.objects['GenericHead']\n"
+        "n = len(obj.data.vertices); rest = np.empty(3 * n); obj.data.vertices.foreach_get('co', rest)\n"
+        "ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()\n"
+        "seen = np.empty(3 * n); ev.vertices.foreach_get('co', seen)\n"
+        "print('RESULT', len(obj.data.shape_keys.key_blocks), max(abs(kb.value) for kb in obj.data.shape_keys.key_blocks[1:]),\n"
+        "      float(np.abs(seen - rest).max() * 1000))\n"
+    )
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stdout + res.stderr
+    keys, top_value, off_mm = res.stdout.split("RESULT ", 1)[1].split()
+    assert int(keys) == 53 and float(top_value) == 0.0 and float(off_mm) < 1e-6

@@ -8,13 +8,13 @@ import cv2
 import numpy as np
 import pytest
 
-from core import cli
-from core.boardcal import calibrate_mirrors_from_board, load_mirrors
-from core.calibrate import Board
-from core.camera import angle_deg
-from core.errors import DegenerateError, InputError
-from core.render import render_board_in_rig
-from core.simulate import face_rig
+from mirrorcap.cli import parser as cli
+from mirrorcap.core.capture.boardcal import calibrate_mirrors_from_board, load_mirrors
+from mirrorcap.core.capture.calibrate import Board
+from mirrorcap.core.geometry.camera import angle_deg
+from mirrorcap.core.common.errors import DegenerateError, InputError
+from mirrorcap.synthetic.render import render_board_in_rig
+from mirrorcap.synthetic.simulate import face_rig
 
 BOARD = "charuco:7x5:20:15"
 

@@ -8,8 +8,8 @@ import ezc3d
 import numpy as np
 import pytest
 
-from core.c3d import c3d_bytes, write_c3d
-from core.errors import InputError
+from mirrorcap.core.take.c3d import c3d_bytes, write_c3d
+from mirrorcap.core.common.errors import InputError
 
 
 def _take(n_frames=40, n_markers=300, seed=0):

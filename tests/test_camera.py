@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from core.camera import Camera, angle_deg
-from core.errors import InputError
+from mirrorcap.core.geometry.camera import Camera, angle_deg
+from mirrorcap.core.common.errors import InputError
 
 
 def test_round_trip_without_and_with_distortion(distorted_camera):

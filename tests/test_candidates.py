@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.candidates import frame_candidates
-from core.simulate import face_rig, rig_motion, synthetic_detections
+from mirrorcap.core.track.candidates import frame_candidates
+from mirrorcap.synthetic.simulate import face_rig, rig_motion, synthetic_detections
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +56,7 @@ def test_a_blob_claimed_twice_stays_with_the_closer_prediction():
     """Procedure step 6's conflicts, as the tracker resolves them: two markers on
     candidates sharing a direct blob, or sharing a mirror blob, -> the one predicted
     closer keeps it; markers on distinct blobs are untouched."""
-    from core.track import _resolve_conflicts
+    from mirrorcap.core.track.tracker import _resolve_conflicts
 
     direct = np.array([10, 10, 11, 12, 13])  # candidates 0 and 1 share direct blob 10
     mirror0 = np.array([-1, 20, 21, 22, 22])  # candidates 3 and 4 share mirror blob 22
@@ -71,7 +71,7 @@ def test_a_blob_claimed_twice_stays_with_the_closer_prediction():
 def test_clip_band_search_finds_exactly_the_pairs_of_a_full_comparison():
     """The whole-take band search (pencil keys + binary search) must return the same
     (direct, mirror) pairs as testing every pair of every frame against eq. 5.2-5.3."""
-    from core.candidates import ClipDetections, _same_frame_pairs, band_pairs
+    from mirrorcap.core.track.candidates import ClipDetections, _same_frame_pairs, band_pairs
 
     rig = face_rig(n_markers=300, seed=3, layout="even")
     _, frames = synthetic_detections(rig, 12, noise_px=0.1, seed=7, missing=0.1, false_blobs=0.5)

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, SAMPLE
-from core import cli
-from core import simulate as sim
-from core.pairs import format_pairs, read_points
+from mirrorcap.cli import parser as cli
+from mirrorcap.synthetic import simulate as sim
+from mirrorcap.core.take.pairs import format_pairs, read_points
 
 
 def _run(args, capsys):
@@ -97,8 +97,8 @@ def test_single_mirror_file(tmp_path, capsys):
 
 
 def test_python_dash_m_entry_point(sample):
-    """The documented `python -m mirrorcap` works (installed package) and so does `python -m core`."""
-    for module in ("mirrorcap", "core"):
+    """The documented `python -m mirrorcap` works (installed package); there is no second command line."""
+    for module in ("mirrorcap",):
         res = subprocess.run([sys.executable, "-m", module, "reconstruct", str(sample / "pairs.csv"),
                               "--camera", str(sample / "camera.json"), "-o", str(sample / f"{module}.csv"), "-q"],
                              capture_output=True, text=True, cwd=ROOT)

@@ -12,7 +12,7 @@ import pytest
 
 from conftest import ROOT
 
-from core.scanio import read_landmarks, read_scan
+from mirrorcap.core.face.scanio import read_landmarks, read_scan
 
 
 def _run(args, timeout=900):
@@ -23,7 +23,7 @@ def _run(args, timeout=900):
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
-    code = ("from mirrorcap.mirrorcap_addon.demo import run_demo\n"
+    code = ("from mirrorcap.demo.rig import run_demo\n"
             f"run_demo({str(out)!r}, quiet=True, preview=False)\n")
     res = _run(["-c", code])
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
@@ -86,13 +86,13 @@ def bake_or_crash(job):
     if Path(job[0]).stem.startswith("crash"):
         print("crashing on purpose", flush=True)
         os._exit(70)
-    from mirrorcap.cli import _bake_one
+    from mirrorcap.cli.batch import _bake_one
 
     return _bake_one(job)
 
 
 def test_batch_goes_on_when_a_take_kills_its_worker(demo, tmp_path):
-    from mirrorcap.cli import run_batch
+    from mirrorcap.cli.batch import run_batch
 
     out, _ = demo
     names = ["take_a", "crash_b", "take_c", "take_d"]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from core.evaluate import score_take
-from core.simulate import face_rig
+from mirrorcap.synthetic.evaluate import score_take
+from mirrorcap.synthetic.simulate import face_rig
 
 
 def test_switches_count_other_markers_and_off_marker_counts_bad_measurements():

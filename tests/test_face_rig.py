@@ -11,17 +11,18 @@ import pytest
 
 from conftest import ROOT
 
-from core.bind import bind_take, fill_gaps, similarity_fit
-from core.c3d import c3d_bytes, read_c3d
-from core.errors import InputError
-from core.facerig import FaceRig, RigSettings, _rotate, blink_closure
-from core.head import LANDMARKS, REGIONS, HeadModel
-from core.headfit import fit_head, subdivide
-from core.headio import head_npz_bytes, load_head_npz
-from core.headsim import EXPRESSIONS, SINGLE_UNITS, performance, place_markers, synthetic_take
-from core.motion import rotation_zyx
-from core.rbf import RBFScattering
-from core.shapes import pca_error_table, pca_shapes
+from mirrorcap.core.face.bind import bind_take, fill_gaps
+from mirrorcap.core.geometry.rigid import similarity_fit
+from mirrorcap.core.take.c3d import c3d_bytes, read_c3d
+from mirrorcap.core.common.errors import InputError
+from mirrorcap.core.face.facerig import FaceRig, RigSettings, _rotate, blink_closure
+from mirrorcap.core.face.head import LANDMARKS, REGIONS, HeadModel
+from mirrorcap.core.face.headfit import fit_head, subdivide
+from mirrorcap.core.face.headio import head_npz_bytes, load_head_npz
+from mirrorcap.synthetic.headsim import EXPRESSIONS, SINGLE_UNITS, performance, place_markers, synthetic_take
+from mirrorcap.core.geometry.rigid import rotation_zyx
+from mirrorcap.core.face.rbf import RBFScattering
+from mirrorcap.core.face.shapes import pca_error_table, pca_shapes
 
 HEAD_DIR = ROOT / "sample_scenes" / "generic_head"
 

@@ -8,15 +8,15 @@ import cv2
 import numpy as np
 import pytest
 
-from core import cli
-from core.calibrate import Board, calibrate_camera
-from core.camera import Camera
-from core.detect import read_detections
-from core.errors import InputError, MirrorCapError
-from core.markers import ColorClasses
-from core.render import match_detections, render_board_views
+from mirrorcap.cli import parser as cli
+from mirrorcap.core.capture.calibrate import Board, calibrate_camera
+from mirrorcap.core.geometry.camera import Camera
+from mirrorcap.core.capture.detect import read_detections
+from mirrorcap.core.common.errors import InputError, MirrorCapError
+from mirrorcap.core.capture.markers import ColorClasses
+from mirrorcap.synthetic.render import match_detections, render_board_views
 from conftest import write_rig_clip
-from core.video import open_source, parse_frame_range
+from mirrorcap.core.capture.video import open_source, parse_frame_range
 
 N_FRAMES = 8
 
@@ -62,7 +62,7 @@ def test_high_bit_depth_and_float_images(tmp_path):
     cv2.imwrite(str(tmp_path / "a.tif"), img16)
     img = next(open_source(tmp_path).frames())[1]
     assert img.dtype == np.uint8 and img[0, 0, 0] == 40000 >> 8
-    from core.video import to_bgr8
+    from mirrorcap.core.capture.video import to_bgr8
 
     f = to_bgr8(np.full((4, 4, 3), 0.5, np.float32))
     assert f.dtype == np.uint8 and f[0, 0, 0] == 128

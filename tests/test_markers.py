@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from benchmarks.extraction import evaluate_extraction
-from core import markers as mk
-from core.errors import InputError
-from core.render import RenderSettings, match_detections, render_rig_frame, rig_clip_frames
-from core.simulate import face_rig
+from mirrorcap.core.capture import markers as mk
+from mirrorcap.core.capture import rig as rigfile
+from mirrorcap.core.common.errors import InputError
+from mirrorcap.synthetic.render import RenderSettings, match_detections, render_rig_frame, rig_clip_frames
+from mirrorcap.synthetic.simulate import face_rig
 
 CLASS_RGB = np.array([s[0] for s in mk.DEFAULT_CLASSES.values()])
 
@@ -51,7 +52,7 @@ def test_colour_classes_at_least_99_percent(rig):
 
 def _grid_frame(comb_px, seed=0):
     """A 12 x 8 grid of well-separated dots straight ahead of the camera (no mirrors)."""
-    from core.camera import Camera
+    from mirrorcap.core.geometry.camera import Camera
 
     cam = Camera.ideal(1400.0, (1280, 720))
     gx, gy = np.meshgrid(np.linspace(-150, 150, 12), np.linspace(-90, 90, 8))
@@ -147,7 +148,7 @@ def test_colour_file_round_trip_and_errors(tmp_path):
 def test_view_split_by_gaps_and_rig_file(rig, tmp_path):
     img, truth = _frame(rig, RenderSettings())
     det = mk.extract_markers(img, mk.ColorClasses.default())
-    layout = mk.split_views_by_gaps(det.x, 12.0)
+    layout = rigfile.split_views_by_gaps(det.x, 12.0)
     view = layout.assign(det.x, det.y)
     pairs, _, _ = match_detections(det.x, det.y, view, truth, max_px=3.0)
     assert len(pairs) >= 0.99 * truth.visible.sum()
@@ -160,19 +161,19 @@ def test_view_split_by_gaps_and_rig_file(rig, tmp_path):
     rig_file = tmp_path / "rig.json"
     rig_file.write_text(json.dumps({"views": {"mirror0": [0, 0, b0, 720], "direct": [b0, 0, b1, 720],
                                               "mirror1": [b1, 0, 1280, 720]}}))
-    from_file = mk.load_rig_views(rig_file).assign(det.x, det.y)
+    from_file = rigfile.load_rig_views(rig_file).assign(det.x, det.y)
     assert np.array_equal(from_file, view)
     partial = tmp_path / "partial.json"
     partial.write_text(json.dumps({"views": {"direct": [b0, 0, b1, 720]}}))
-    assert set(mk.load_rig_views(partial).assign(det.x, det.y).tolist()) == {-1, 0}
+    assert set(rigfile.load_rig_views(partial).assign(det.x, det.y).tolist()) == {-1, 0}
     with pytest.raises(InputError, match="no clear gap"):
-        mk.split_views_by_gaps(np.linspace(0, 1000, 500), 12.0)
+        rigfile.split_views_by_gaps(np.linspace(0, 1000, 500), 12.0)
     for text, message in [("[]", "needs"), ('{"views": {"direct": [0, 0, 10]}}', r"\[x0, y0, x1, y1\]"),
                           ('{"views": {"direct": [0, 0, 10, 10], "mirror2": [0, 0, 1, 1]}}', "unknown view"),
                           ('{"views": {"direct": [10, 0, 5, 10]}}', "empty rectangle")]:
         rig_file.write_text(text)
         with pytest.raises(InputError, match=message):
-            mk.load_rig_views(rig_file)
+            rigfile.load_rig_views(rig_file)
 
 
 def test_clip_frames_move_and_keep_truth(rig):

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core import mirror as mr
-from core import simulate as sim
-from core.camera import Camera, angle_deg
-from core.errors import DegenerateError, InputError
+from mirrorcap.core.geometry import epipolar, refine
+from mirrorcap.core.geometry import mirror as mr
+from mirrorcap.synthetic import simulate as sim
+from mirrorcap.core.geometry.camera import Camera, angle_deg
+from mirrorcap.core.common.errors import DegenerateError, InputError
 
 
 def _views(camera, pts, planes, noise=0.0, seed=0, quantize=False):
@@ -342,9 +343,9 @@ def test_mirrored_epipolar_line_eq_5_2(distorted_camera, face):
     normal, d = face.planes[0]
     direct, mirrored = _views(distorted_camera, face.points, [(normal, d)])
     plane = mr.MirrorPlane(normal=normal, d=d)
-    lines = mr.mirrored_epipolar_lines(direct, distorted_camera, plane)
+    lines = epipolar.mirrored_epipolar_lines(direct, distorted_camera, plane)
     assert np.allclose(np.linalg.norm(lines[:, :2], axis=1), 1.0)
-    dist = mr.epipolar_distance(lines, mirrored[0], distorted_camera)
+    dist = epipolar.epipolar_distance(lines, mirrored[0], distorted_camera)
     assert dist.max() < 1e-6  # true correspondences lie on their lines, in pixels, despite distortion
     # eq. 5.2 in normalised coordinates: (-c y + b) x' + (c x - a) y' + (-b x + a y) = 0
     p, pm = distorted_camera.normalize(direct), distorted_camera.normalize(mirrored[0])
@@ -358,7 +359,7 @@ def test_mirrored_epipolar_line_eq_5_2(distorted_camera, face):
         (q[:, 0] - distorted_camera.K[0, 2] - distorted_camera.K[0, 1] * (q[:, 1] - distorted_camera.K[1, 2])
          / distorted_camera.K[1, 1]) / distorted_camera.K[0, 0],
         (q[:, 1] - distorted_camera.K[1, 2]) / distorted_camera.K[1, 1]])
-    assert np.allclose(mr.epipolar_distance(lines, q_distorted, distorted_camera), 2.0, atol=1e-6)
+    assert np.allclose(epipolar.epipolar_distance(lines, q_distorted, distorted_camera), 2.0, atol=1e-6)
 
 
 def test_epipolar_band_selects_true_pairs(paper_camera, face):
@@ -366,11 +367,11 @@ def test_epipolar_band_selects_true_pairs(paper_camera, face):
     normal, d = face.planes[1]
     direct, mirrored = _views(cam, face.points, [(normal, d)], noise=0.3, seed=12)
     plane = mr.MirrorPlane(normal=normal, d=d)
-    band = mr.in_mirrored_epipolar_band(direct, mirrored[0], cam, plane, half_width_px=1.5)
+    band = epipolar.in_mirrored_epipolar_band(direct, mirrored[0], cam, plane, half_width_px=1.5)
     assert band.shape == (len(direct), len(direct))
     assert np.mean(np.diag(band)) > 0.99  # true pairs inside the band
     assert band.sum(axis=1).mean() < 0.1 * len(direct)  # the band is selective
-    vertical = mr.in_mirrored_epipolar_band(direct, mirrored[0], cam, plane, half_width_px=1.5, vertical=True)
+    vertical = epipolar.in_mirrored_epipolar_band(direct, mirrored[0], cam, plane, half_width_px=1.5, vertical=True)
     assert np.mean(np.diag(vertical)) > 0.99
     # eq. 5.3: vertical half-width k on lines that are not vertical is >= the perpendicular one
     assert np.all(vertical >= band)
@@ -380,7 +381,7 @@ def test_epipolar_band_selects_true_pairs(paper_camera, face):
 def test_refinement_keeps_exact_solution_and_reduces_reprojection_error(face):
     cam = face.camera
     normals, ds, p, pm, vis = _face_setup(face)
-    res = mr.refine_reconstruction(p, pm, vis, normals, ds, face.points, focal_px=cam.focal_px)
+    res = refine.refine_reconstruction(p, pm, vis, normals, ds, face.points, focal_px=cam.focal_px)
     assert res.rms_px_after < 1e-6
     assert np.max(np.abs(res.points - face.points)) < 1e-6
     # with noise: start from the linear solution with a perturbed second d
@@ -388,7 +389,7 @@ def test_refinement_keeps_exact_solution_and_reduces_reprojection_error(face):
     u = np.stack([mr.normal_from_correspondences(p, pm[k]) for k in range(2)])
     start_ds = ds * np.array([1.0, 1.02])
     X = mr.points_from_planes(p, pm, u, start_ds)
-    res = mr.refine_reconstruction(p, pm, vis, u, start_ds, X, focal_px=cam.focal_px)
+    res = refine.refine_reconstruction(p, pm, vis, u, start_ds, X, focal_px=cam.focal_px)
     assert res.rms_px_after < res.rms_px_before
     assert res.ds[0] == ds[0]  # gauge: first mirror's d fixed
     # the second mirror's d started 2 % off; ML pulls it at least 5x closer

@@ -6,16 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.motion import (
+from mirrorcap.core.track.motion import (
     ConstantVelocityKalman,
-    angles_zyx,
     conjecture_motion,
     false_tracking,
     neighbours,
-    rigid_fit,
-    rotation_zyx,
 )
-from core.simulate import face_rig
+from mirrorcap.core.geometry.rigid import angles_zyx, rigid_fit, robust_rigid_fit, rotation_zyx
+from mirrorcap.synthetic.simulate import face_rig
 
 
 @pytest.fixture(scope="module")
@@ -44,6 +42,30 @@ def test_rigid_fit_is_exact_and_a_proper_rotation():
     B = A @ R.T + t
     B[0] += 100  # an outlier with zero weight changes nothing
     assert np.allclose(rigid_fit(A, B, weights=w)[0], R, atol=1e-12)
+
+
+def test_one_rigid_fit_batched_and_robust():
+    """The one rigid fit: a batch of frames gives each frame's own fit, and the reweighted
+    fit ignores markers moving with the expression (one batched call, as the binder uses it)."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(40, 3)) * 40
+    R = rotation_zyx(rng.uniform(-0.3, 0.3, (5, 3)))
+    t = rng.normal(size=(5, 3)) * 20
+    B = A @ np.swapaxes(R, 1, 2) + t[:, None]
+    Rb, tb = rigid_fit(A, B)
+    for f in range(5):
+        Rf, tf = rigid_fit(A, B[f])
+        assert np.allclose(Rb[f], Rf, atol=1e-12) and np.allclose(tb[f], tf, atol=1e-9)
+    assert np.allclose(Rb, R, atol=1e-12)
+    moved = B.copy()
+    moved[:, :8] += rng.normal(size=(5, 8, 3)) * 15  # a fifth of the markers deform
+    Rr, tr, w = robust_rigid_fit(A, moved, iterations=8)
+    assert w.shape == (5, 40) and w[:, :8].max() < w[:, 8:].min()
+    assert np.degrees(np.abs(angles_zyx(Rr) - angles_zyx(R))).max() < 0.05
+    Rp = rigid_fit(A, moved)[0]
+    assert np.degrees(np.abs(angles_zyx(Rp) - angles_zyx(R))).max() > 0.2  # the plain fit is pulled off
+    R1, t1, w1 = robust_rigid_fit(A, moved[2], iterations=8)
+    assert np.allclose(R1, Rr[2], atol=1e-9) and np.allclose(w1, w[2], atol=1e-9)
 
 
 def test_eq_5_4_angles_round_trip():
@@ -124,7 +146,7 @@ def test_conjectured_motion_follows_the_neighbours(face_field):
 def test_conjecture_since_last_seen_keeps_the_markers_own_motion(face_field):
     """A marker with its own offset (e.g. a mole the neighbours do not share) keeps it
     while missing; eq. 5.8 alone would replace it by the neighbours' average."""
-    from core.motion import conjecture_since_last_seen
+    from mirrorcap.core.track.motion import conjecture_since_last_seen
 
     neutral, motion = face_field
     idx, dist = neighbours(neutral, 25.0)
@@ -152,7 +174,7 @@ def test_learned_conjectures_follow_each_pairs_own_relation(face_field):
     (moves like the neighbours) is wrong by the difference, the relation learned over the
     frames where both were measured is not. A pair with too few shared frames gives no
     estimate; a pair whose neighbour never moved falls back on eq. 5.8's v_i = v_j."""
-    from core.motion import learned_conjectures
+    from mirrorcap.core.track.motion import learned_conjectures
 
     neutral, field = face_field
     rng = np.random.default_rng(7)
@@ -194,7 +216,7 @@ def test_gaps_follow_the_neighbours_and_meet_both_ends():
     """core.motion.conjecture_gaps: a marker hidden while its neighbours move (an
     expression rising and falling) follows them through the gap and meets its own
     measurements at both ends; time interpolation would miss the whole motion."""
-    from core.motion import conjecture_gaps, interpolate_in_time, neighbours
+    from mirrorcap.core.track.motion import conjecture_gaps, interpolate_in_time, neighbours
 
     rng = np.random.default_rng(3)
     N, F = 40, 120

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.mirror import MirrorPlane
-from core.pairing import pair_tracks, track_2d
-from core.simulate import face_rig, synthetic_detections
+from mirrorcap.core.geometry.mirror import MirrorPlane
+from mirrorcap.core.track.pairing import pair_tracks, track_2d
+from mirrorcap.synthetic.simulate import face_rig, synthetic_detections
 
 
 @pytest.fixture(scope="module")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.errors import DegenerateError, InputError
-from core.rbf import RBFScattering
-from core.simulate import face_rig
+from mirrorcap.core.common.errors import DegenerateError, InputError
+from mirrorcap.core.face.rbf import RBFScattering
+from mirrorcap.synthetic.simulate import face_rig
 
 
 @pytest.fixture(scope="module")

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.camera import angle_deg
-from core.errors import DegenerateError
-from core.selfcal import build_candidates, link_self_calibrated, self_calibrate_mirror
-from core.simulate import face_rig, synthetic_detections
+from mirrorcap.core.geometry.camera import angle_deg
+from mirrorcap.core.common.errors import DegenerateError
+from mirrorcap.core.track.selfcal import build_candidates, link_self_calibrated, self_calibrate_mirror
+from mirrorcap.synthetic.simulate import face_rig, synthetic_detections
 
 
 @pytest.fixture(scope="module")

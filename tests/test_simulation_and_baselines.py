@@ -7,9 +7,9 @@ import pytest
 
 from benchmarks import baselines as bl
 from benchmarks import simulation as bs
-from core import mirror as mr
-from core import simulate as sim
-from core.camera import Camera
+from mirrorcap.core.geometry import mirror as mr
+from mirrorcap.synthetic import simulate as sim
+from mirrorcap.core.geometry.camera import Camera
 
 
 def test_mirror_from_angles_geometry():

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from benchmarks.tracking import score
-from core.simulate import face_rig, rig_performance, synthetic_detections
-from core.track import TrackSettings, track
+from mirrorcap.synthetic.simulate import face_rig, rig_performance, synthetic_detections
+from mirrorcap.core.track.tracker import TrackSettings, track
 
 
 def _score(frames, perf, result):
@@ -46,7 +46,7 @@ def test_clean_performance_is_tracked_without_identity_switches(performance):
     # fitting all markers instead is biased by the expression (measured ~1 deg)
     import cv2
 
-    from core.motion import rotation_zyx
+    from mirrorcap.core.geometry.rigid import rotation_zyx
 
     true_rv = np.array([cv2.Rodrigues(R)[0].ravel() for R in perf[2]])
     est_rv = np.array([cv2.Rodrigues(rotation_zyx(h[:3]))[0].ravel() for h in result.head_pose])
@@ -62,9 +62,9 @@ def test_rigid_markers_named_by_region_carry_the_head_pose(performance):
     than 4 markers is refused."""
     import cv2
 
-    from core.errors import DegenerateError
-    from core.motion import rotation_zyx
-    from core.track import rigid_by_image
+    from mirrorcap.core.common.errors import DegenerateError
+    from mirrorcap.core.geometry.rigid import rotation_zyx
+    from mirrorcap.core.track.tracker import rigid_by_image
 
     rig, perf = performance
     _, frames = synthetic_detections(rig, 80, seed=1, performance=perf, noise_px=0.05)
@@ -97,7 +97,7 @@ def test_markers_that_cannot_be_decided_are_reported(performance):
     position; the result lists both, where they were first seen and why."""
     import dataclasses
 
-    from core.mirror import reflect_points
+    from mirrorcap.core.geometry.mirror import reflect_points
 
     rig, perf = performance
     _, frames = synthetic_detections(rig, 80, seed=1, performance=perf, noise_px=0.05)
@@ -125,7 +125,7 @@ def test_markers_that_cannot_be_decided_are_reported(performance):
             mid[0] = np.r_[mid[0], [-1]]
         edited.append(dataclasses.replace(fr, mirror=mirror, mirror_color=colour, mirror_id=mid))
     # the first frames' pairing leaves both undecided, the twin as ambiguous in mirror 0
-    from core.track import _paired_tracks, _undecided
+    from mirrorcap.core.track.tracker import _paired_tracks, _undecided
 
     normals = np.stack([n for n, _ in rig.planes])
     ds = np.array([d for _, d in rig.planes])
@@ -247,8 +247,8 @@ def test_false_blobs_keep_off_every_markers_image(performance):
     """The generator's false blobs stay 3 px from the image of every marker in the view --
     detected, dropped by ``missing``, occluded or turned away -- since a blob there would
     merge with the marker's own or stand in for it exactly."""
-    from core.mirror import reflect_points
-    from core.simulate import visibility
+    from mirrorcap.core.geometry.mirror import reflect_points
+    from mirrorcap.synthetic.simulate import visibility
 
     rig, perf = performance
     _, frames = synthetic_detections(rig, 6, seed=9, performance=perf, noise_px=0.0, missing=0.3, false_blobs=0.5,

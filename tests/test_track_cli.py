@@ -9,9 +9,9 @@ import ezc3d
 import numpy as np
 import pytest
 
-from core import cli
+from mirrorcap.cli import parser as cli
 from conftest import write_rig_clip
-from core.simulate import rig_motion
+from mirrorcap.synthetic.simulate import rig_motion
 
 N_FRAMES = 30
 

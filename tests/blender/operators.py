@@ -95,8 +95,9 @@ out["rigid_nowhere"] = call(bpy.ops.mirrorcap.track, take=str(work / "rigid_bad.
 s.rigid_region = (0, 0, 0, 0)
 
 # Blender's own 2D tracks as the input: every detection of 12 frames as a one-frame track
-from mirrorcap.core.markers import ColorClasses, MarkerExtractor, load_rig_views  # noqa: E402
-from mirrorcap.core.video import open_source  # noqa: E402
+from mirrorcap.core.capture.markers import ColorClasses, MarkerExtractor  # noqa: E402
+from mirrorcap.core.capture.rig import load_rig_views  # noqa: E402
+from mirrorcap.core.capture.video import open_source  # noqa: E402
 
 src = open_source(sample / "clip.mp4")
 layout = load_rig_views(sample / "rig.json")

@@ -1,7 +1,8 @@
 """Run with the venv's python: read a baked .blend back with bpy and print JSON.
 
-argv: OUT.blend MODE OBJECT_NAME -> {"basis": [...], "keys": {name: co}, "values": [[...per frame]], "frames": [...]}
-Values are each shape key's animated value at every scene frame (F-curves evaluated by Blender).
+argv: OUT.blend OBJECT_NAME OUT.npz -> basis, keys, names, values (each shape key's animated value
+at every scene frame, F-curves evaluated by Blender), frames, fps, and ``evaluated``: the mesh a user
+sees at every scene frame (the depsgraph's evaluated object, all shape keys and modifiers applied).
 """
 import json
 import sys
@@ -29,6 +30,15 @@ for layer in key.animation_data.action.layers:
             for fc in bag.fcurves:
                 fcurves[fc.data_path.split('"')[1]] = fc
 values = np.array([[fcurves[nm].evaluate(f) for nm in names] for f in frames])
+evaluated = np.empty((len(frames), n, 3), np.float32)
+for i, f in enumerate(frames):
+    scene.frame_set(f)
+    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    mesh = ev.to_mesh()
+    co = np.empty(3 * n, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    evaluated[i] = co.reshape(-1, 3)
+    ev.to_mesh_clear()
 np.savez(out, basis=blocks["Basis"], keys=np.stack([blocks[nm] for nm in names]), names=np.array(names),
-         values=values, frames=np.array(frames), fps=scene.render.fps)
+         values=values, frames=np.array(frames), fps=scene.render.fps, evaluated=evaluated)
 print(json.dumps({"keys": len(names), "frames": len(frames)}))

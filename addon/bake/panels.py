@@ -1,0 +1,28 @@
+"""The bake panel of the "MirrorCap" sidebar tab; they lay out ``scene.mirrorcap`` and call operators."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..common.panel import SidebarPanel
+
+
+class MIRRORCAP_PT_bake(SidebarPanel, bpy.types.Panel):
+    bl_space_type = "VIEW_3D"
+    bl_label = "Bind and Bake"
+
+    def draw(self, context):
+        s = context.scene.mirrorcap
+        col = self.layout.column()
+        col.operator("mirrorcap.bind", icon="CONSTRAINT_BONE")
+        col.prop(s, "bake_mode")
+        if s.bake_mode == "pca":
+            col.prop(s, "modes")
+        col.prop(s, "head_motion")
+        col.prop(s, "blinks")
+        op = col.operator("mirrorcap.bake", icon="SHAPEKEY_DATA")
+        op.mode, op.modes, op.head_motion, op.blinks = s.bake_mode, s.modes, s.head_motion, s.blinks
+        col.label(text="Retargeting: coming next", icon="INFO")
+
+
+PANELS = (MIRRORCAP_PT_bake,)

@@ -1,0 +1,61 @@
+"""A C3D take in the scene: one empty per marker under a parent empty, animated.
+
+The parent carries the unit conversion (a take in mm, or in the relative units of a
+self-calibrated take, is shown at 1 unit = 1 mm) and the camera-to-Blender frame change of
+:mod:`.frames`; each marker's location is keyed on the frames it was reported (gaps stay
+gaps), three F-curves per marker, each written with one ``keyframe_points.foreach_set``.
+Scene frame ``1 + f`` is take frame ``f``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ...core.take.c3d import read_c3d
+from .frames import core_to_blender
+from .properties import preferences
+
+
+def import_take(context, path, name: str | None = None):
+    """Add the take at ``path``; returns the parent empty."""
+    data = read_c3d(path)
+    P = data["points"]                          # (F, M, 3) core frame
+    F, M, _ = P.shape
+    name = name or Path(path).stem
+    coll = bpy.data.collections.new(f"MirrorCap take {name}")
+    context.scene.collection.children.link(coll)
+    parent = bpy.data.objects.new(f"MirrorCap take {name}", None)
+    parent.empty_display_type = "ARROWS"
+    parent.empty_display_size = 0.02
+    parent["mirrorcap_take"] = str(path)
+    parent["mirrorcap_units"] = data["units"]
+    coll.objects.link(parent)
+    prefs = preferences(context)
+    size = 0.001 * (prefs.empty_size_mm if prefs is not None else 2)
+    B = core_to_blender(np.nan_to_num(P)).reshape(F, M, 3)      # metres at 1 unit = 1 mm
+    seen = np.all(np.isfinite(P), axis=2)
+    frames = np.arange(F, dtype=np.float32) + 1.0
+    for m, label in enumerate(data["labels"]):
+        ob = bpy.data.objects.new(f"{name}_{label}", None)
+        ob.empty_display_type = "SPHERE"
+        ob.empty_display_size = size
+        ob.parent = parent
+        coll.objects.link(ob)
+        ok = seen[:, m]
+        if not ok.any():
+            continue
+        ob.location = B[np.argmax(ok), m]
+        action = bpy.data.actions.new(f"{name}_{label}")
+        ob.animation_data_create().action = action
+        for axis in range(3):
+            fc = action.fcurve_ensure_for_datablock(ob, "location", index=axis)
+            n = int(ok.sum())
+            fc.keyframe_points.add(n)
+            fc.keyframe_points.foreach_set("co", np.column_stack([frames[ok], B[ok, m, axis]]).astype(np.float32).ravel())
+            fc.update()
+    context.scene.frame_start, context.scene.frame_end = 1, F
+    context.scene.render.fps = max(1, int(round(data["rate"])))
+    return parent

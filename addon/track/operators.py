@@ -1,0 +1,172 @@
+"""Track (Movie Clip Editor) and the take (3D View): the rigid markers, tracking a rig video or the clip's own tracks to a C3D take, importing a take as empties.
+
+Operators (``bpy.ops.mirrorcap.*``); all inputs are operator properties, an empty one falls back
+to the scene's settings. Long ones are modal jobs (:class:`..common.jobs.MirrorCapJobOperator`)."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, IntProperty, StringProperty
+
+from ...core.common.errors import InputError
+from ..common.inputs import input_path, required, rig_and_colours, rigid_from_settings, scene_settings, take_report_path
+from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
+
+
+class MIRRORCAP_OT_rigid_from_tracks(MirrorCapOperator):
+    """Set the rigid region (the markers that carry the head pose) to the box around the clip's selected tracks"""
+
+    bl_idname = "mirrorcap.rigid_from_tracks"
+    bl_label = "Rigid From Selected Tracks"
+
+    frame: IntProperty(name="Frame", default=-1, min=-1, description="video frame (0-based); -1: the scene's current")
+    margin_px: IntProperty(name="Margin", default=6, min=0, description="pixels added around the tracks")
+
+    def run(self, context):
+        from ..common.clip import find_clip, selected_track_pixels
+
+        s = scene_settings(context)
+        clip = find_clip(required(input_path(s.video, what="rig video"), "rig video"))
+        n = context.scene.frame_current - 1 if self.frame < 0 else self.frame
+        xy = selected_track_pixels(clip, n)
+        if len(xy) < 4:
+            raise InputError(f"select at least 4 direct-view tracks at frame {n} (forehead, nose bridge); "
+                             f"{len(xy)} selected")
+        lo = np.maximum(np.floor(xy.min(axis=0)) - self.margin_px, 0)
+        hi = np.minimum(np.ceil(xy.max(axis=0)) + self.margin_px + 1, clip.size)
+        s.rigid_region = (int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1]))
+        return f"rigid region {tuple(s.rigid_region)} around {len(xy)} tracks"
+
+
+class _TrackInputs:
+    """Properties shared by the two track operators."""
+
+    take: StringProperty(name="Take", subtype="FILE_PATH", description="TAKE.c3d to write (default: the scene's)")
+    import_result: BoolProperty(name="Import Take", default=True, description="add the take to the scene as empties")
+
+    def _common(self, context):
+        from ...core.capture.boardcal import load_mirrors
+        from ...core.geometry.camera import Camera
+
+        s = scene_settings(context)
+        camera = Camera.load(required(input_path(s.camera, what="camera file"), "camera file (CAMERA.json)"))
+        mirrors = load_mirrors(input_path(s.mirrors, what="mirrors file")) if s.mirrors else None
+        take = required(input_path(self.take, s.take, must_exist=False), "take file")
+        if not take.parent.is_dir():
+            raise InputError(f"the take's folder {take.parent} does not exist (save the .blend first for // paths)")
+        return s, camera, mirrors, take
+
+    def _finish_track(self, context, result):
+        take, report = result
+        scene_settings(context).take = str(take)
+        if self.import_result:
+            from ..common.take_io import import_take
+
+            import_take(context, take)
+        pf = report["per_frame"]
+        undecided = len(report["markers"].get("undecided", ()))
+        return (f"{report['markers']['count']} markers over {report['frames']['count']} frames -> {take.name}; "
+                f"{np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured per frame"
+                + (f"; {undecided} markers not paired with a mirror image (no 3D; listed in the report)" if undecided else ""))
+
+
+class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
+    """Track the rig video: markers, mirror planes, 3D trajectories with head motion, written as a C3D take"""
+
+    bl_idname = "mirrorcap.track"
+    bl_label = "Track"
+
+    video: StringProperty(name="Video", subtype="FILE_PATH", description="rig video (default: the scene's)")
+
+    def prepare(self, context):
+        from ...core.capture.video import open_source
+
+        s, camera, mirrors, take = self._common(context)
+        source = open_source(required(input_path(self.video, s.video, what="rig video"), "rig video"))
+        rig, colors = rig_and_colours(s)
+        layout = rig.views
+        rigid, rigid_source = rigid_from_settings(s, rig, colors)
+        log = self.messages
+        end = s.frame_end or None
+        n = len(range(s.frame_start, min(end or source.frame_count, source.frame_count)))
+
+        def work(progress):
+            from ...core.track.pipeline import run_track
+            from ...core.track.tracker import TrackSettings
+
+            report = run_track(source, camera, take, report=take_report_path(take), colors=colors, layout=layout,
+                               mirrors=mirrors, start=s.frame_start, end=end,
+                               settings=TrackSettings.with_conjecture_limit(s.conjecture_limit_mm),
+                               rigid=rigid, rigid_source=rigid_source, log=log,
+                               progress=lambda k: progress(0.8 * k / max(n, 1), "finding markers"),
+                               track_progress=progress.stage(0.8, 1.0, "tracking"))
+            return take, report
+
+        return work
+
+    def finish(self, context, result):
+        return self._finish_track(context, result)
+
+
+class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
+    """Track in 3D from 2D tracks made with Blender's own tracker (the clip's tracks are the detections)"""
+
+    bl_idname = "mirrorcap.track_clip_tracks"
+    bl_label = "Track From Clip Tracks"
+
+    clip: StringProperty(name="Clip", description="movie clip name (default: the one of the scene's rig video)")
+    tracking_object: StringProperty(name="Tracking Object", default="",
+                                    description="the clip's tracking object holding the tracks (default: all)")
+
+    def prepare(self, context):
+        from ..common.clip import clip_tracks_to_detections, find_clip
+
+        s, camera, mirrors, take = self._common(context)
+        clip = bpy.data.movieclips.get(self.clip) if self.clip else find_clip(input_path(s.video, what="rig video"))
+        if clip is None:
+            raise InputError("open the rig video as a clip first")
+        if tuple(clip.size) != tuple(camera.image_size):
+            raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the "
+                             f"clip is {clip.size[0]}x{clip.size[1]}")
+        rig, colors = rig_and_colours(s)
+        layout = rig.views
+        rigid, rigid_source = rigid_from_settings(s, rig, colors)
+        numbers, frames = clip_tracks_to_detections(clip, layout, self.tracking_object or None)
+        log = self.messages
+        fps = float(clip.fps) or 30.0
+
+        def work(progress):
+            from ...core.track.pipeline import track_detections
+            from ...core.track.tracker import TrackSettings
+
+            report = track_detections(numbers, frames, camera, fps, take, report=take_report_path(take),
+                                      mirrors=mirrors, progress=progress.stage(0.0, 1.0, "tracking"),
+                                      settings=TrackSettings.with_conjecture_limit(s.conjecture_limit_mm),
+                                      timings={"detect": 0.0}, rigid=rigid, rigid_source=rigid_source,
+                                      log=log)
+            return take, report
+
+        return work
+
+    def finish(self, context, result):
+        return self._finish_track(context, result)
+
+
+class MIRRORCAP_OT_import_take(MirrorCapOperator):
+    """Add a C3D take to the scene as animated empties (one per marker) under one parent"""
+
+    bl_idname = "mirrorcap.import_take"
+    bl_label = "Import Take"
+
+    filepath: StringProperty(name="Take", subtype="FILE_PATH")
+
+    def run(self, context):
+        from ..common.take_io import import_take
+
+        path = required(input_path(self.filepath, scene_settings(context).take, what="take"), "take (TAKE.c3d)")
+        parent = import_take(context, path)
+        return f"imported {len(parent.children)} markers from {path.name}"
+
+
+OPERATORS = (MIRRORCAP_OT_rigid_from_tracks, MIRRORCAP_OT_track, MIRRORCAP_OT_track_clip_tracks, MIRRORCAP_OT_import_take,)

@@ -1,0 +1,246 @@
+"""What each ``mirrorcap`` command does (the parser is :mod:`.parser`). Each command imports
+what it needs when it runs, so the command line starts fast and the core commands work without
+``bpy``."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from ..core import __version__
+from ..core.common.errors import MirrorCapError
+
+
+def reconstruct(args) -> int:
+    from ..core.common.files import write_files_atomically
+    from ..core.geometry.camera import Camera
+    from ..core.geometry.reconstruct import KnownLength, reconstruct_pairs
+    from ..core.take.pairs import format_points, read_pairs
+
+    camera = Camera.load(args.camera)
+    table = read_pairs(args.pairs)
+    known = None
+    if args.known_length is not None:
+        a, b, mm = args.known_length
+        try:
+            mm = float(mm)
+        except ValueError:
+            raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
+        known = KnownLength(a, b, mm)
+    result = reconstruct_pairs(table, camera, known_length=known, refine=args.refine,
+                               robust=not args.no_ransac, threshold_px=args.threshold, seed=args.seed)
+    out = Path(args.output)
+    report = result.report()
+    report["inputs"] = {"pairs": str(args.pairs), "camera": str(args.camera)}
+    report["mirrorcap_version"] = __version__
+    write_files_atomically({
+        out.with_suffix(".json"): json.dumps(report, indent=2) + "\n",
+        out: format_points(result.ids, result.points, result.mirrors_label),
+    })
+    if not args.quiet:
+        print(f"{len(result.ids)} points ({report['fused_points']} seen in both mirrors) -> {out} "
+              f"[{result.units}]")
+        for k, pl in enumerate(result.planes):
+            err = pl.expected_error_deg
+            print(f"  mirror {k}: normal ({pl.normal[0]:+.5f}, {pl.normal[1]:+.5f}, {pl.normal[2]:+.5f}) "
+                  f"d={pl.d:.6g}  inliers {pl.n_inliers}/{pl.inliers.size}  noise {pl.noise_px:.3f} px  "
+                  f"expected normal error {err:.4f} deg")
+        for w in result.warnings:
+            print(f"  warning: {w}")
+    return 0
+
+
+def _progress_line(text: str, final: bool) -> None:
+    """A progress line on stderr, rewritten in place until the last."""
+    print(f"\r{text}", end="\n" if final else "", file=sys.stderr, flush=True)
+
+
+def _open(args):
+    from ..core.capture.video import open_source, parse_frame_range
+
+    source = open_source(args.source, fps=getattr(args, "fps", None))
+    start, end = parse_frame_range(getattr(args, "frames", None))
+    return source, start, end
+
+
+def calibrate(args) -> int:
+    from ..core.capture.calibrate import Board, calibrate_camera
+    from ..core.common.files import write_files_atomically
+
+    board = Board.parse(args.board)
+    source, _, _ = _open(args)
+    result = calibrate_camera(source, board, max_views=args.max_views, min_views=args.min_views,
+                              max_rms_px=args.max_rms)
+    write_files_atomically({Path(args.output): json.dumps(result.to_dict(), indent=2) + "\n"})
+    if not args.quiet:
+        K = result.camera.K
+        print(f"calibrated from {result.views_used} of {result.views_tried} views, RMS reprojection error "
+              f"{result.rms_px:.3f} px -> {args.output}")
+        print(f"  fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f}  "
+              f"dist {' '.join(f'{v:+.4f}' for v in result.camera.dist)}")
+    return 0
+
+
+def detect(args) -> int:
+    from ..core.capture.detect import run_detection
+    from ..core.capture.markers import ColorClasses, ExtractionSettings
+    from ..core.capture.rig import load_rig
+    from ..core.geometry.camera import Camera
+
+    colors = ColorClasses.load_or_default(args.colors)
+    layout = load_rig(args.rig).views
+    camera = Camera.load(args.camera) if args.camera else None
+    if args.threshold < 0 or args.threshold >= 255:
+        raise MirrorCapError("--threshold must be in 0..254")
+    if args.min_area < 1 or args.marker_diameter < 0:
+        raise MirrorCapError("--min-area must be at least 1 and --marker-diameter non-negative")
+    settings = ExtractionSettings(threshold=args.threshold, min_area=args.min_area,
+                                  marker_diameter_px=args.marker_diameter)
+    source, start, end = _open(args)
+    report = run_detection(source, args.output, colors=colors, settings=settings, layout=layout, camera=camera,
+                           start=start, end=end, step=args.step,
+                           progress=None if args.quiet else _progress_line)
+    if not args.quiet:
+        c = report["counts"]
+        n = report["frames"]["processed"]
+        print(f"{n} frames -> {args.output}: per frame {c['direct'] / n:.1f} direct, {c['mirror0'] / n:.1f} mirror0, "
+              f"{c['mirror1'] / n:.1f} mirror1 ({report['frames_per_second']:.0f} frames/s)")
+    return 0
+
+
+def track(args) -> int:
+    import numpy as np
+
+    from ..core.capture.boardcal import load_mirrors
+    from ..core.capture.markers import ColorClasses
+    from ..core.capture.rig import load_rig, rigid_markers
+    from ..core.geometry.camera import Camera
+    from ..core.track.pipeline import run_track
+    from ..core.track.tracker import TrackSettings
+
+    camera = Camera.load(args.camera)
+    colors = ColorClasses.load_or_default(args.colors)
+    rig = load_rig(args.rig)
+    rigid, rigid_source = rigid_markers((0, 0, 0, 0), (), rig, colors)
+    mirrors = load_mirrors(args.mirrors) if args.mirrors else None
+    known = None
+    if args.known_length:
+        a, b, mm = args.known_length
+        try:
+            known = (a, b, float(mm))
+        except ValueError:
+            raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
+    if not args.face_distance > 0:
+        raise MirrorCapError("--face-distance must be a positive number of millimetres")
+    if not args.conjecture_limit >= 0:
+        raise MirrorCapError("--conjecture-limit must be a number of millimetres, 0 or more (or inf)")
+    settings = TrackSettings.with_conjecture_limit(args.conjecture_limit)
+    source, start, end = _open(args)
+    report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
+                       colors=colors, layout=rig.views, mirrors=mirrors, known_length=known, start=start, end=end,
+                       step=args.step, face_distance_mm=args.face_distance, settings=settings, rigid=rigid,
+                       rigid_source=rigid_source)
+    if not args.quiet:
+        pf = report["per_frame"]
+        n = report["frames"]["count"]
+        print(f"{report['markers']['count']} markers over {n} frames -> {args.output} [{report['units']}]")
+        print(f"  per frame: {np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured, "
+              f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts, "
+              f"{np.mean(pf['withheld']):.1f} conjectures withheld; "
+              f"tracking {report['timings_s']['tracking_frames_per_s']:.0f} frames/s")
+        for text in report["warnings"]:
+            print(f"  warning: {text}")
+    return 0
+
+
+def mirrors(args) -> int:
+    from ..core.capture.boardcal import calibrate_mirrors_from_board, write_mirrors_json
+    from ..core.capture.calibrate import Board
+    from ..core.capture.rig import load_rig
+    from ..core.common.files import write_files_atomically
+    from ..core.geometry.camera import Camera
+
+    board = Board.parse(args.board)
+    camera = Camera.load(args.camera)
+    layout = load_rig(args.rig).views
+    source, start, end = _open(args)
+    if camera.image_size != source.size:
+        raise MirrorCapError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but "
+                             f"{source.path} is {source.size[0]}x{source.size[1]}")
+    frames = (img for _, img in source.frames(start, end, args.step))
+    result = calibrate_mirrors_from_board(frames, camera, board, layout=layout, threshold_px=args.threshold)
+    write_files_atomically({Path(args.output): write_mirrors_json(result, board)})
+    if not args.quiet:
+        print(f"mirror planes from {result.frames_used} frames -> {args.output}")
+        for k, pl in enumerate(result.planes):
+            print(f"  mirror {k}: normal ({pl.normal[0]:+.5f}, {pl.normal[1]:+.5f}, {pl.normal[2]:+.5f}) "
+                  f"d {pl.d:.2f} mm  corners {pl.n_inliers}/{pl.inliers.size}  noise {pl.noise_px:.3f} px")
+    return 0
+
+
+def colors_learn(args) -> int:
+    from ..core.capture.detect import learn_color_classes
+    from ..core.common.files import write_files_atomically
+
+    source, start, end = _open(args)
+    names = [n.strip() for n in args.names.split(",")] if args.names else None
+    classes = learn_color_classes(source, args.classes, names=names, start=start, end=end, step=args.step,
+                                  threshold=args.threshold)
+    write_files_atomically({Path(args.output): json.dumps(classes.to_dict(), indent=2) + "\n"})
+    if not args.quiet:
+        print(f"{len(classes.names)} colour classes -> {args.output}: {', '.join(classes.names)}")
+    return 0
+
+
+def demo_mirrors(args) -> int:
+    from ..demo.mirrors import run_demo
+
+    return run_demo(Path(args.out), quiet=args.quiet)
+
+
+def bake(args) -> int:
+    from ..addon.bake.bake import run_bake
+    from ..core.face.facerig import RigSettings
+
+    if args.modes < 1:
+        raise SystemExit("mirrorcap: error: --modes must be at least 1")
+    settings = RigSettings(k=args.k, blinks=not args.no_blinks, blink_seed=args.blink_seed,
+                           blink_interval_s=args.blink_interval)
+    res = run_bake(args.take, args.head, args.output, object_name=args.object, mode=args.mode, n_modes=args.modes,
+                   neutral_frame=args.neutral_frame, head_pose_report=args.head_pose, head_motion=args.head_motion,
+                   settings=settings, report=args.report, drop_unseen=args.drop_unseen,
+                   conjecture_unseen=args.conjecture_unseen)
+    if not args.quiet:
+        line = (f"baked {res['frames']} frames onto {res['object']} ({res['vertices']} vertices) as "
+                f"{'one shape key per frame' if res['mode'] == 'frames' else str(res['modes']) + ' PCA modes'}")
+        if res["mode"] == "pca":
+            line += f"; PCA error max {res['pca_max_error_mm']:.3f} mm, mean {res['pca_mean_error_mm']:.4f} mm"
+        print(line)
+        how = ("landmarks " + ", ".join(res["landmarks_used"]) if res["registration"] == "landmarks"
+               else "the skin surface")
+        print(f"  {res['markers']} markers registered by {how} (RMS {res['landmark_rms_mm']:.2f} mm), "
+              f"binding distance max {res['binding_distance_mm']['max']:.2f} mm")
+        print(f"  {res['timings_s']['total_s']:.2f} s -> {res['output']}")
+    return 0
+
+
+def batch(args) -> int:
+    options = {"object": args.object, "mode": args.mode, "modes": args.modes, "neutral_frame": args.neutral_frame,
+               "head_motion": args.head_motion, "no_blinks": args.no_blinks, "blink_seed": args.blink_seed,
+               "blink_interval": args.blink_interval, "k": args.k, "drop_unseen": args.drop_unseen,
+               "conjecture_unseen": args.conjecture_unseen}
+    from .batch import run_batch
+
+    summary = run_batch(args.takes, args.head, args.out, workers=args.workers, options=options, quiet=args.quiet)
+    if not args.quiet:
+        print(f"{summary['takes'] - summary['failed']} of {summary['takes']} takes baked in "
+              f"{summary['wall_seconds']:.1f} s with {summary['processes']} worker"
+              f"{'s' if summary['processes'] > 1 else ''} -> {args.out}/batch.json")
+    return 1 if summary["failed"] else 0
+
+
+def demo(args) -> int:
+    from ..demo.rig import run_demo
+
+    return run_demo(args.out, quiet=args.quiet)

@@ -1,0 +1,225 @@
+"""The ``mirrorcap`` command line: the one parser (also ``python -m mirrorcap``).
+
+Commands (each documented in the README):
+
+``mirrorcap reconstruct PAIRS.csv --camera CAMERA.json -o POINTS.csv [--known-length ID_A ID_B MM]``
+    mirror planes + 3D points from one frame of correspondences.
+``mirrorcap calibrate IMAGES_OR_VIDEO --board SPEC -o CAMERA.json``
+    camera intrinsics and distortion from views of a chessboard or ChArUco board.
+``mirrorcap detect VIDEO [--camera CAMERA.json] [--colors COLORS.json] [--rig RIG.json] -o DETECTIONS.csv``
+    markers in every frame, in the direct view and both mirrors.
+``mirrorcap track VIDEO --camera CAMERA.json -o TAKE.c3d [--report REPORT.json] [--mirrors MIRRORS.json]``
+    labelled 3D marker trajectories with head motion separated.
+``mirrorcap mirrors VIDEO --camera CAMERA.json --board charuco:... -o MIRRORS.json``
+    mirror planes (in mm) from a ChArUco board seen directly and in both mirrors.
+``mirrorcap colors learn VIDEO --classes K -o COLORS.json``
+    colour classes learned from sample frames.
+``mirrorcap bake TAKE.c3d --head HEAD.blend -o OUT.blend [--mode frames|pca] [--modes K] ...``
+    bind the take to the head, run the face rig on every frame, write the head with shape keys.
+``mirrorcap batch TAKES... --head HEAD.blend --out DIR [--workers N] [bake options]``
+    bake many takes in parallel worker processes (:mod:`.batch`).
+``mirrorcap demo [--out DIR]`` / ``mirrorcap demo-mirrors [--out DIR]``
+    the whole job on the embedded sample clip / the mirror core on the two-mirror sample.
+
+The parser imports nothing heavy: each command's module imports what it needs when it runs
+(numpy for ``track``, ``bpy`` only for ``bake``, ``batch`` and ``demo``). Bad input exits with
+status 2 and one line ``mirrorcap: error: ...`` on stderr; no output file is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..core import __version__
+from ..core.common.errors import MirrorCapError
+from . import commands
+
+
+def _source_options(parser, what: str = "video file, image folder or glob", frames: bool = True):
+    """The options every command reading a rig video shares."""
+    parser.add_argument("source", help=what)
+    if frames:
+        parser.add_argument("--frames", help="START:END frame range (END exclusive)")
+        parser.add_argument("--step", type=int, default=1, help="use every STEP-th frame")
+    parser.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+
+
+def _bake_options(parser) -> None:
+    parser.add_argument("--object", help="the head object's name (default: the only head in the file)")
+    parser.add_argument("--mode", choices=("frames", "pca"), default="frames",
+                        help="frames: one shape key per frame; pca: K eigen-deformation keys (default frames)")
+    parser.add_argument("--modes", type=int, default=8, help="number of PCA modes (default 8)")
+    parser.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
+    parser.add_argument("--head-motion", action="store_true", help="key the head motion as the object's transform")
+    unseen = parser.add_mutually_exclusive_group()
+    unseen.add_argument("--drop-unseen", action="store_true",
+                        help="leave out markers not seen in the neutral frame (default: refuse the take)")
+    unseen.add_argument("--conjecture-unseen", action="store_true",
+                        help="place markers not seen in the neutral frame (a tracker's markers first seen later) "
+                             "from their neighbours' learned relations; those expected off by more than 2 mm "
+                             "(3 sigma) are left out")
+    parser.add_argument("--no-blinks", action="store_true", help="no synthetic eyelid blinks")
+    parser.add_argument("--blink-seed", type=int, default=0, help="seed of the blink process (default 0)")
+    parser.add_argument("--blink-interval", type=float, default=2.5, help="mean seconds between blinks (default 2.5)")
+    parser.add_argument("--k", type=float, default=16.0, help="RBF kernel constant k of eq. 7.1 in mm (default 16)")
+    parser.add_argument("-q", "--quiet", action="store_true")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of every ``mirrorcap`` command."""
+    parser = argparse.ArgumentParser(
+        prog="mirrorcap",
+        description="MirrorCap: facial capture from one camera and two mirrors.",
+    )
+    parser.add_argument("--version", action="version", version=f"mirrorcap {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    rec = sub.add_parser(
+        "reconstruct", help="mirror planes and 3D points from real-vs-mirrored pairs",
+        description="Estimate each mirror plane from PAIRS.csv (closed form, eq. 3.8, with RANSAC) and "
+                    "reconstruct the markers (eq. 3.10-3.12). Writes POINTS.csv and POINTS.json.",
+    )
+    rec.add_argument("pairs", help="PAIRS.csv with columns id,mirror,x,y,xm,ym (pixels)")
+    rec.add_argument("--camera", required=True, help="CAMERA.json with K, dist and image_size")
+    rec.add_argument("-o", "--output", required=True, help="POINTS.csv to write (a .json report goes beside it)")
+    rec.add_argument("--known-length", nargs=3, metavar=("ID_A", "ID_B", "MM"),
+                     help="distance between two markers in millimetres; sets the output units to mm")
+    rec.add_argument("--refine", action="store_true",
+                     help="maximum-likelihood refinement of planes and points by reprojection error")
+    rec.add_argument("--threshold", type=float, default=2.0,
+                     help="RANSAC inlier threshold: symmetric epipolar distance in pixels (default 2)")
+    rec.add_argument("--no-ransac", action="store_true",
+                     help="use every pair in the closed-form estimate (the paper's eq. 3.8 as is)")
+    rec.add_argument("--seed", type=int, default=0, help="random seed of RANSAC (default 0)")
+    rec.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    rec.set_defaults(func=commands.reconstruct)
+
+    cal = sub.add_parser("calibrate", help="camera intrinsics from views of a calibration board",
+                         description="Calibrate the camera from a video or images of a chessboard or ChArUco board.")
+    _source_options(cal, frames=False)
+    cal.add_argument("--board", required=True,
+                     help="chessboard:COLSxROWS:SQUARE_MM (inner corners) or "
+                          "charuco:COLSxROWS:SQUARE_MM:MARKER_MM[:DICT] (squares)")
+    cal.add_argument("-o", "--output", required=True, help="CAMERA.json to write")
+    cal.add_argument("--max-views", type=int, default=40, help="frames sampled evenly from the source (default 40)")
+    cal.add_argument("--min-views", type=int, default=6, help="fewest views with the board found (default 6)")
+    cal.add_argument("--max-rms", type=float, default=1.0, help="largest acceptable RMS reprojection error, px")
+    cal.set_defaults(func=commands.calibrate)
+
+    det = sub.add_parser("detect", help="find the markers in every frame of a rig video",
+                         description="Marker extraction (threshold, colour 1-NN, connected components, merging, "
+                                     "specks removed, sub-pixel centres) in the direct view and both mirrors.")
+    _source_options(det)
+    det.add_argument("-o", "--output", required=True, help="DETECTIONS.csv to write (a .json report goes beside it)")
+    det.add_argument("--camera", help="CAMERA.json; its image size must match the video")
+    det.add_argument("--colors", help="COLORS.json colour classes (default: the four blacklight colours)")
+    det.add_argument("--rig", help="RIG.json with view rectangles (default: split at the two widest gaps)")
+    det.add_argument("--threshold", type=float, default=60.0, help="brightness threshold on max(R,G,B), 0..254")
+    det.add_argument("--min-area", type=int, default=4, help="smallest marker in pixels (default 4)")
+    det.add_argument("--marker-diameter", type=float, default=6.0,
+                     help="marker diameter in pixels; closer fragments of one colour merge (default 6)")
+    det.set_defaults(func=commands.detect)
+
+    trk = sub.add_parser("track", help="labelled 3D marker trajectories from a rig video (C3D)",
+                         description="Detect markers, calibrate the mirrors (MIRRORS.json or self-calibration from "
+                                     "the markers), track them in 3D with head motion separated, and write a C3D take.")
+    _source_options(trk, "rig video file, image folder or glob")
+    trk.add_argument("--camera", required=True, help="CAMERA.json")
+    trk.add_argument("-o", "--output", required=True, help="TAKE.c3d to write")
+    trk.add_argument("--report", help="REPORT.json to write beside the take")
+    trk.add_argument("--mirrors", help="MIRRORS.json (from `mirrorcap mirrors`); default: self-calibration")
+    trk.add_argument("--known-length", nargs=3, metavar=("LABEL_A", "LABEL_B", "MM"),
+                     help="distance between two tracked markers (labels m000..) in mm; sets the units to mm")
+    trk.add_argument("--face-distance", type=float, default=600.0, metavar="MM",
+                     help="without --mirrors: the face's distance from the camera that sets the take's scale "
+                          "(default 600; --known-length makes the scale exact)")
+    trk.add_argument("--conjecture-limit", type=float, default=2.0, metavar="MM",
+                     help="report a hidden marker's conjectured position only where its expected error (3 sigma) "
+                          "is within MM; the rest stay gaps (default 2; 'inf' keeps every conjecture, 0 none)")
+    trk.add_argument("--colors", help="COLORS.json colour classes")
+    trk.add_argument("--rig", help="RIG.json view rectangles, and optionally the rigid markers (\"rigid\")")
+    trk.set_defaults(func=commands.track)
+
+    mir = sub.add_parser("mirrors", help="mirror planes in mm from a ChArUco board seen in all three views",
+                         description="Detect a ChArUco board directly and (flipped) in both mirrors, estimate each "
+                                     "mirror plane (eq. 3.8 with RANSAC) and fix the scale from the board's size.")
+    _source_options(mir, "video file, image folder or glob of the board in the rig")
+    mir.add_argument("--camera", required=True, help="CAMERA.json")
+    mir.add_argument("--board", required=True, help="charuco:COLSxROWS:SQUARE_MM:MARKER_MM[:DICT]")
+    mir.add_argument("-o", "--output", required=True, help="MIRRORS.json to write")
+    mir.add_argument("--rig", help="RIG.json view rectangles (default: the image's thirds)")
+    mir.add_argument("--threshold", type=float, default=2.0, help="RANSAC threshold in pixels (default 2)")
+    mir.set_defaults(func=commands.mirrors)
+
+    colors = sub.add_parser("colors", help="colour classes for marker labelling")
+    colors_sub = colors.add_subparsers(dest="colors_command", required=True, metavar="ACTION")
+    learn = colors_sub.add_parser("learn", help="learn colour classes from sample frames (k-means)")
+    _source_options(learn)
+    learn.add_argument("--classes", type=int, required=True, help="number of colour classes")
+    learn.add_argument("-o", "--output", required=True, help="COLORS.json to write")
+    learn.add_argument("--names", help="comma-separated class names, in hue order")
+    learn.add_argument("--threshold", type=float, default=60.0)
+    learn.set_defaults(func=commands.colors_learn)
+
+    demo = sub.add_parser("demo-mirrors", help="mirror planes and 3D points of the embedded two-mirror sample",
+                          description="Reconstruct sample_scenes/mirror_demo (pairs -> mirror planes -> 3D points "
+                                      "in mm) and compare with its ground truth. (`mirrorcap demo` runs the whole "
+                                      "capture-to-animation job; it needs bpy.)")
+    demo.add_argument("--out", default="out", help="folder for the outputs (default out/)")
+    demo.add_argument("-q", "--quiet", action="store_true")
+    demo.set_defaults(func=commands.demo_mirrors)
+    _blender_commands(sub)
+    return parser
+
+
+def _blender_commands(sub) -> None:
+    """The commands that run inside Blender (``bpy``)."""
+    bake = sub.add_parser("bake", help="bake a take onto a head as shape keys (needs bpy)",
+                          description="Register TAKE.c3d to the head (by markers labelled lm_<name>, else by the skin surface), run the face rig "
+                                      "(regions, jaw, inner lip, blinks) and write the head with shape keys.")
+    bake.add_argument("take", help="TAKE.c3d (from `mirrorcap track` or any C3D with landmark labels)")
+    bake.add_argument("--head", required=True, help="HEAD.blend with a head mesh (region_*, lm_* vertex groups)")
+    bake.add_argument("-o", "--output", required=True, help="OUT.blend to write")
+    _bake_options(bake)
+    bake.add_argument("--head-pose", help="REPORT.json of `mirrorcap track` (default: estimate the head motion)")
+    bake.add_argument("--report", help="BAKE.json to write with the figures of the bake")
+    bake.set_defaults(func=commands.bake)
+
+    batch = sub.add_parser("batch", help="bake many takes in parallel processes (needs bpy)",
+                           description="Bake every TAKE.c3d onto the head, N at a time, each in its own process. "
+                                       "A failing take is reported and does not stop the others.")
+    batch.add_argument("takes", nargs="+", help="TAKE.c3d files")
+    batch.add_argument("--head", required=True, help="HEAD.blend with a head mesh")
+    batch.add_argument("--out", required=True, help="output folder: <take>.blend, <take>.bake.json, batch.json")
+    batch.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
+    _bake_options(batch)
+    batch.set_defaults(func=commands.batch)
+
+    demo = sub.add_parser("demo", help="the whole job on the embedded sample clip (needs bpy)",
+                          description="Track the sample rig clip, fit the generic head to the sample scan, bind, "
+                                      "bake, and write DIR/demo.blend, DIR/report.html and DIR/preview.mp4.")
+    demo.add_argument("--out", default="out", help="output folder (default out/)")
+    demo.add_argument("-q", "--quiet", action="store_true")
+    demo.set_defaults(func=commands.demo)
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "threshold", 1.0) <= 0:
+        parser.error("--threshold must be positive")
+    try:
+        return args.func(args)
+    except MirrorCapError as exc:
+        print(f"mirrorcap: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:       # outputs are written atomically: nothing half-written is left
+        print("mirrorcap: interrupted", file=sys.stderr)
+        return 130
+
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

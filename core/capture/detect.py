@@ -1,0 +1,238 @@
+"""Rig video -> DETECTIONS.csv (``mirrorcap detect``), and learning colour classes.
+
+DETECTIONS.csv -- one row per marker found in a frame::
+
+    frame,view,x,y,color,area,intensity
+    0,mirror0,212.4183,340.0127,pink,21,187.3
+
+``frame`` is the source's frame number; ``view`` is ``direct``, ``mirror0`` (the mirror
+imaged on the left) or ``mirror1``; ``x, y`` the sub-pixel centre in pixels of the
+original image; ``color`` the colour-class name; ``area`` in pixels; ``intensity``
+the mean brightest-channel value (0..255).
+
+DETECTIONS.json beside it records the source, the frame selection, the view layout
+used, the colour classes, the settings, counts and timings.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from ..common.errors import InputError
+from ..common.files import default_file_mode, write_files_atomically
+from ..common.log import FrameProgress
+from ..geometry.camera import Camera
+from .markers import ColorClasses, ExtractionSettings, MarkerExtractor
+from .rig import VIEW_NAMES, ViewLayout, split_views_by_gaps
+from .video import VideoSource
+
+DETECTION_COLUMNS = ("frame", "view", "x", "y", "color", "area", "intensity")
+LAYOUT_FRAMES = 30  # frames pooled to find the gaps between views
+
+
+def format_detection_rows(frame: int, view, x, y, color, area, intensity, view_names=VIEW_NAMES,
+                          color_names=()) -> str:
+    """CSV rows for one frame's detections, formatted in one C-level operation."""
+    n = len(x)
+    if n == 0:
+        return ""
+    vn = np.asarray(view_names, dtype=object)[np.asarray(view)]
+    cn = np.asarray(color_names, dtype=object)[np.asarray(color)]
+    cols = [np.full(n, frame).tolist(), vn.tolist(), np.asarray(x).tolist(), np.asarray(y).tolist(), cn.tolist(),
+            np.asarray(area).tolist(), np.asarray(intensity).tolist()]
+    flat = [v for row in zip(*cols) for v in row]
+    return ("%d,%s,%.4f,%.4f,%s,%d,%.1f\n" * n) % tuple(flat)
+
+
+def read_detections(path) -> dict:
+    """DETECTIONS.csv -> dict of arrays: frame, view (index into VIEW_NAMES), x, y,
+    color (name), area, intensity."""
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header is None or tuple(h.strip() for h in header) != DETECTION_COLUMNS:
+            raise InputError(f"{path} is not a DETECTIONS.csv (header {','.join(DETECTION_COLUMNS)})")
+        rows = list(reader)
+    cols = list(zip(*rows)) if rows else [()] * 7
+    index = {v: k for k, v in enumerate(VIEW_NAMES)}
+    try:
+        return {
+            "frame": np.array(cols[0], dtype=int), "view": np.array([index[v] for v in cols[1]], dtype=int),
+            "x": np.array(cols[2], dtype=float), "y": np.array(cols[3], dtype=float),
+            "color": np.array(cols[4], dtype=object), "area": np.array(cols[5], dtype=int),
+            "intensity": np.array(cols[6], dtype=float),
+        }
+    except (KeyError, ValueError) as exc:
+        raise InputError(f"{path}: malformed row ({exc})") from None
+
+
+def _layout_from(pending, settings: ExtractionSettings, source: VideoSource) -> ViewLayout:
+    xs = np.concatenate([d.x for _, d in pending])
+    if xs.size == 0:
+        raise InputError(f"no markers found in the first {len(pending)} frames of {source.path} "
+                         f"(threshold {settings.threshold:g}); is this a rig video, or does --threshold need lowering?")
+    return split_views_by_gaps(xs, min_gap_px=2.0 * settings.marker_diameter_px)
+
+
+class DetectionStream:
+    """Detections of a source frame by frame, each assigned to its view: iterate to get
+    ``(frame_number, Detections, view (n,))``. Until the view layout is known (from a
+    rig file, or from the first ``LAYOUT_FRAMES`` frames' gaps) detections are buffered
+    -- detections, never images. ``extract_s`` accumulates the extraction time and
+    ``processed`` the frames read; ``layout`` is set once known."""
+
+    def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
+                 layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
+                 progress=None):
+        self.source, self.colors, self.settings, self.layout = source, colors, settings, layout
+        self.start, self.end, self.step = start, end, step
+        end_eff = source.frame_count if end is None else min(end, source.frame_count)
+        self.total = len(range(start, end_eff, step))
+        self.progress = progress
+        self.extract_s = 0.0
+        self.processed = 0
+
+    def __iter__(self):
+        extractor = MarkerExtractor(self.colors, self.settings)
+        pending = []
+        for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
+            t0 = time.perf_counter()
+            det = extractor(frame)
+            self.extract_s += time.perf_counter() - t0
+            self.processed += 1
+            if self.progress:
+                self.progress(self.processed)
+            if self.layout is None:
+                pending.append((n, det))
+                if len(pending) >= min(LAYOUT_FRAMES, self.total):
+                    self.layout = _layout_from(pending, self.settings, self.source)
+                    for m, d in pending:
+                        yield m, d, self.layout.assign(d.x, d.y)
+                    pending = []
+            else:
+                yield n, det, self.layout.assign(det.x, det.y)
+        if self.layout is None:
+            if self.processed == 0:
+                raise InputError(f"no frame could be read from {self.source.path}")
+            self.layout = _layout_from(pending, self.settings, self.source)
+            for m, d in pending:
+                yield m, d, self.layout.assign(d.x, d.y)
+
+
+def _check_camera(camera: Camera | None, source: VideoSource):
+    if camera is not None and camera.image_size != source.size:
+        raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but "
+                         f"{source.path} is {source.size[0]}x{source.size[1]}")
+
+
+def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = None,
+                  settings: ExtractionSettings | None = None, layout: ViewLayout | None = None,
+                  camera: Camera | None = None, start: int = 0, end: int | None = None, step: int = 1,
+                  progress=None) -> dict:
+    """Stream ``source`` through the extractor and write DETECTIONS.csv (+ .json)
+    atomically. Returns the report written to the JSON. ``progress(text, final)``, if given,
+    receives a progress line at most once a second (:class:`..common.log.FrameProgress`)."""
+    colors = colors or ColorClasses.default()
+    settings = settings or ExtractionSettings()
+    _check_camera(camera, source)
+    output = Path(output)
+    if not output.parent.is_dir():
+        raise InputError(f"output folder {output.parent} does not exist")
+    stream = DetectionStream(source, colors, settings, layout, start, end, step)
+    stream.progress = FrameProgress(stream.total, "detect", progress or None)
+    counts = np.zeros(len(VIEW_NAMES) + 1, dtype=np.int64)  # last: outside every view
+    t_write = 0.0
+    fd, tmp = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".tmp", dir=output.parent)
+    t_start = time.perf_counter()
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(",".join(DETECTION_COLUMNS) + "\n")
+            for n, det, view in stream:
+                counts[:-1] += np.bincount(view[view >= 0], minlength=len(VIEW_NAMES))
+                counts[-1] += np.count_nonzero(view < 0)
+                ok = view >= 0
+                t0 = time.perf_counter()
+                fh.write(format_detection_rows(n, view[ok], det.x[ok], det.y[ok], det.color[ok], det.area[ok],
+                                               det.intensity[ok], color_names=colors.names))
+                t_write += time.perf_counter() - t0
+            fh.flush()
+            os.fsync(fh.fileno())
+        stream.progress(stream.processed, final=True)
+        done = stream.processed
+        if done == 0:
+            raise InputError(f"no frame could be read from {source.path}")
+        if counts[:-1].sum() == 0:
+            raise InputError(f"no markers found in {source.path} (threshold {settings.threshold:g}); "
+                             "is this a rig video, or does --threshold need lowering?")
+        elapsed = time.perf_counter() - t_start
+        t_extract = stream.extract_s
+        end_eff = source.frame_count if end is None else min(end, source.frame_count)
+        layout = stream.layout
+        report = {
+            "source": {"path": source.path, "kind": source.kind, "fps": source.fps,
+                       "frame_count": source.frame_count, "size": list(source.size)},
+            "frames": {"start": start, "end": end_eff, "step": step, "processed": done},
+            "layout": layout.to_dict(),
+            "colors": colors.to_dict(),
+            "settings": asdict(settings),
+            "counts": {**{v: int(c) for v, c in zip(VIEW_NAMES, counts)}, "outside_views": int(counts[-1])},
+            "timings_s": {"total": elapsed, "extract": t_extract, "write": t_write,
+                          "decode_and_other": elapsed - t_extract - t_write},
+            "frames_per_second": done / elapsed if elapsed > 0 else None,
+        }
+        write_files_atomically({output.with_suffix(".json"): json.dumps(report, indent=2) + "\n"})
+        os.chmod(tmp, default_file_mode())
+        os.replace(tmp, output)
+        tmp = None
+        return report
+    finally:
+        if tmp is not None and os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def learn_color_classes(source: VideoSource, n_classes: int, *, names=None, start: int = 0, end: int | None = None,
+                        step: int = 1, max_frames: int = 50, threshold: float = 60.0,
+                        marker_diameter_px: float = 6.0, samples_per_class: int = 8) -> ColorClasses:
+    """Learn ``n_classes`` colour classes from the markers of sample frames: k-means
+    (OpenCV, fixed seed) on each marker's mean normalised colour; each class keeps
+    its centre and the members nearest to it as 1-NN samples. Classes are ordered
+    by hue; ``names`` (one per class) name them, else ``class0``, ``class1``, ..."""
+    import cv2
+
+    if n_classes < 1:
+        raise InputError("--classes must be at least 1")
+    if names is not None and len(names) != n_classes:
+        raise InputError(f"{len(names)} names given for {n_classes} classes")
+    one_class = ColorClasses.from_dict({"classes": [{"name": "any", "samples": [[1, 1, 1]]}]})
+    extractor = MarkerExtractor(one_class, ExtractionSettings(threshold=threshold,
+                                                              marker_diameter_px=marker_diameter_px))
+    pooled = []
+    for k, (_, frame) in enumerate(source.frames(start, end, step)):
+        if k >= max_frames:
+            break
+        pooled.append(extractor(frame).rgb)
+    rgb = np.concatenate(pooled) if pooled else np.zeros((0, 3))
+    if rgb.shape[0] < n_classes * 3:
+        raise InputError(f"only {rgb.shape[0]} markers found in the sample frames; cannot learn {n_classes} classes")
+    cv2.setRNGSeed(0)
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-6)
+    _, labels, centres = cv2.kmeans(rgb.astype(np.float32), n_classes, None, crit, 5, cv2.KMEANS_PP_CENTERS)
+    labels = labels.ravel()
+    hue = np.arctan2(np.sqrt(3) * (centres[:, 1] - centres[:, 2]), 2 * centres[:, 0] - centres[:, 1] - centres[:, 2])
+    order = np.argsort(hue)
+    classes = []
+    for rank, k in enumerate(order):
+        members = rgb[labels == k]
+        near = members[np.argsort(np.linalg.norm(members - centres[k], axis=1))[: samples_per_class - 1]]
+        samples = np.vstack([centres[k][None], near])
+        classes.append({"name": names[rank] if names else f"class{rank}", "samples": samples.tolist()})
+    return ColorClasses.from_dict({"classes": classes})

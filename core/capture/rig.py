@@ -1,0 +1,172 @@
+"""The rig file (RIG.json): where each view lies in the image and which markers are rigid.
+
+``{"views": {"direct": [x0, y0, x1, y1], "mirror0": [...], "mirror1": [...]},
+"rigid": {"region": [x0, y0, x1, y1], "colors": ["yellow", ...]}}`` -- both keys optional.
+Without views, detections are split at the two widest gaps in x; without rigid markers, the
+tracker finds them (the markers that deform least). :func:`load_rig` reads the whole file
+once; :func:`rigid_markers` is the one rule that picks the rigid markers from the user's
+settings, the rig file or none.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..common.errors import InputError
+from ..common.files import read_json
+
+if TYPE_CHECKING:  # annotations only: rig files need no colour classes
+    from .markers import ColorClasses
+
+VIEW_NAMES = ("direct", "mirror0", "mirror1")
+
+
+@dataclass
+class ViewLayout:
+    """How detections map to views: rectangles per view, or two x boundaries."""
+
+    boundaries: tuple | None = None  # (b0, b1): x < b0 mirror0, b0 <= x < b1 direct, x >= b1 mirror1
+    regions: dict = field(default_factory=dict)  # view name -> (x0, y0, x1, y1)
+
+    def assign(self, x, y) -> np.ndarray:
+        """View index per detection: 0 direct, 1 mirror0, 2 mirror1, -1 outside every region."""
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        if self.regions:
+            view = np.full(x.shape, -1, dtype=int)
+            for k, name in enumerate(VIEW_NAMES):
+                if name in self.regions:
+                    x0, y0, x1, y1 = self.regions[name]
+                    view[(x >= x0) & (x < x1) & (y >= y0) & (y < y1)] = k
+            return view
+        b0, b1 = self.boundaries
+        return np.where(x < b0, 1, np.where(x < b1, 0, 2))
+
+    def to_dict(self) -> dict:
+        if self.regions:
+            return {"views": {k: list(v) for k, v in self.regions.items()}}
+        return {"boundaries_x": list(self.boundaries)}
+
+
+def split_views_by_gaps(x, min_gap_px: float) -> ViewLayout:
+    """The two widest gaps in the sorted x coordinates (pooled over frames) separate
+    mirror0 | direct | mirror1. Refuses when either gap is under ``min_gap_px``."""
+    xs = np.sort(np.asarray(x, dtype=float))
+    if xs.size < 6:
+        raise InputError(f"too few markers ({xs.size}) to split the direct and mirror views automatically")
+    gaps = np.diff(xs)
+    idx = np.sort(np.argsort(gaps)[-2:])
+    if gaps[idx].min() < min_gap_px:
+        raise InputError(
+            "cannot split the direct and mirror views automatically: no clear gap between them "
+            f"(widest gaps {gaps[idx[0]]:.1f} and {gaps[idx[1]]:.1f} px); give a rig file with --rig"
+        )
+    b = tuple(float((xs[i] + xs[i + 1]) / 2) for i in idx)
+    return ViewLayout(boundaries=b)
+
+
+def load_rig_views(path) -> ViewLayout | None:
+    """The ``views`` rectangles of a RIG.json (see module docstring); None when the file
+    only names the rigid markers (the views are then split automatically)."""
+    data = read_json(path, "rig file")
+    views = data.get("views") if isinstance(data, dict) else None
+    if views is None and isinstance(data, dict) and "rigid" in data:
+        return None
+    if not isinstance(views, dict) or "direct" not in views:
+        raise InputError(f"rig file {path}: needs \"views\" with at least \"direct\" (and mirror0, mirror1)")
+    regions = {}
+    for name, rect in views.items():
+        if name not in VIEW_NAMES:
+            raise InputError(f"rig file {path}: unknown view {name!r} (use {', '.join(VIEW_NAMES)})")
+        regions[name] = rectangle(rect, f"rig file {path}: view {name!r}")
+    return ViewLayout(regions=regions)
+
+
+def rectangle(values, what: str) -> tuple:
+    """``(x0, y0, x1, y1)`` floats from four numbers, ``x1 > x0`` and ``y1 > y0``; otherwise
+    an input error naming ``what``."""
+    try:
+        x0, y0, x1, y1 = (float(v) for v in values)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be [x0, y0, x1, y1]") from None
+    if not (x1 > x0 and y1 > y0):
+        raise InputError(f"{what} is an empty rectangle")
+    return x0, y0, x1, y1
+
+
+@dataclass
+class RigidMarkers:
+    """Which markers carry the head pose, as a RIG.json names them (``"rigid"``): those
+    whose first-frame image lies in ``region`` ``(x0, y0, x1, y1)`` pixels (e.g. a box
+    around the forehead and nose bridge) and/or whose colour class is one of ``colors``
+    (e.g. a head band's markers in a colour of their own). Either may be None."""
+
+    region: tuple | None = None
+    colors: tuple | None = None  # colour-class names
+
+
+def load_rig_rigid(path) -> RigidMarkers | None:
+    """The optional ``"rigid"`` entry of a RIG.json: ``{"region": [x0, y0, x1, y1],
+    "colors": ["green", ...]}`` (either or both); None when the file names no rigid markers."""
+    data = read_json(path, "rig file")
+    entry = data.get("rigid") if isinstance(data, dict) else None
+    if entry is None:
+        return None
+    if not isinstance(entry, dict) or not ({"region", "colors"} & set(entry)) or set(entry) - {"region", "colors"}:
+        raise InputError(f"rig file {path}: \"rigid\" must be {{\"region\": [x0, y0, x1, y1], \"colors\": [names]}} "
+                         "(either or both)")
+    region = rectangle(entry["region"], f"rig file {path}: the rigid region") if "region" in entry else None
+    colors = None
+    if "colors" in entry:
+        names = entry["colors"]
+        if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+            raise InputError(f"rig file {path}: rigid colors must be a list of colour-class names")
+        colors = tuple(names)
+    return RigidMarkers(region=region, colors=colors)
+
+
+@dataclass
+class Rig:
+    """RIG.json: the views (``None``: split at the gaps) and the rigid markers (``None``: automatic)."""
+
+    views: ViewLayout | None = None
+    rigid: RigidMarkers | None = None
+
+
+def load_rig(path) -> Rig:
+    """The whole rig file, checked once (a bad ``"rigid"`` entry is an error even for a
+    command that only needs the views). ``path`` ``None``: the defaults."""
+    if path is None:
+        return Rig()
+    return Rig(views=load_rig_views(path), rigid=load_rig_rigid(path))
+
+
+def rigid_selection(rigid: RigidMarkers | None, classes: ColorClasses) -> tuple | None:
+    """Rigid markers as :func:`..track.tracker.track` takes them: ``(region, colour
+    class indices)``; colour names not among ``classes`` are an input error."""
+    if rigid is None:
+        return None
+    unknown = [n for n in (rigid.colors or ()) if n not in classes.names]
+    if unknown:
+        raise InputError(f"RIG.json names rigid colour classes {', '.join(unknown)} that are not among "
+                         f"{', '.join(classes.names)}")
+    return rigid.region, None if rigid.colors is None else tuple(classes.names.index(n) for n in rigid.colors)
+
+
+def rigid_markers(region, colour_names, rig: Rig, classes: ColorClasses) -> tuple[tuple | None, str]:
+    """The rigid markers the tracker uses and where they came from: the user's ``region``
+    ``(x0, y0, x1, y1)`` (all 0: none) and/or ``colour_names`` if given ("settings"), else the
+    rig file's (``"rig file"``), else none (``"automatic"``: the tracker finds them).
+    Returns ``(spec for the tracker or None, source)``."""
+    region = tuple(int(v) for v in region)
+    names = tuple(n.strip() for n in colour_names if n.strip())
+    if any(region) or names:
+        box = rectangle(region, f"the rigid region {region}") if any(region) else None
+        rigid, source = RigidMarkers(region=box, colors=names or None), "settings"
+    else:
+        rigid, source = rig.rigid, "rig file"
+    spec = rigid_selection(rigid, classes)
+    return spec, (source if spec is not None else "automatic")

@@ -1,0 +1,190 @@
+"""Late markers (Lin 2003, section 5.8 "missing markers", the case of a marker first seen
+after the neutral frame): chains of unclaimed candidates linked frame to frame become new
+markers, entered at their neutral position so they pass the neighbour test and merge with
+their own earlier chains."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry.rigid import rotation_zyx
+from .candidates import ClipCandidates, ClipDetections
+from .result import COLOUR_SPACING_MM, TrackSettings, earns_place
+
+
+def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
+                      focal_px: float, link_mm: float = 1.0, link_frames: int = 3, min_frames: int = 5,
+                      same_marker_mm: float = 4.0, same_ray_px: float = 2.0, min_support: float = 0.6,
+                      max_rms_factor: float = 2.0):
+    """Markers the initial window missed (hidden at the start, turned into view later).
+
+    Candidates the first pass left alone -- their direct blob and their mirror blobs
+    unclaimed by any tracked marker -- are taken into the head frame (the first pass's
+    head pose) and linked: two of the same colour within ``link_mm`` of each other and
+    at most ``link_frames`` frames apart belong together. A chain seen in at least
+    ``min_frames`` frames, and in ``min_support`` of the frames it spans, with an RMS
+    band residual within ``max_rms_factor`` of the tracked markers', is a marker (a
+    chance alignment of two markers' blobs drifts in and out of the band, anywhere
+    in it: ``core.pairing`` has the same test). A chain that mostly runs within ``same_marker_mm`` of an existing marker, or
+    within ``same_ray_px`` of its image (its direct blob, paired with a wrong mirror
+    blob), is that marker found again and is not added; nor is one whose neutral
+    position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
+    blob with a better supported chain. Chance pairings with false blobs
+    are scattered in space and time and do not chain. A marker added gets as its
+    neutral position where it was first seen, less its neighbours' motion then
+    (:func:`_motion_near`), and is measured from the first frame of its chains on
+    (before, its position is only a conjecture, and a false blob near that would be
+    taken for it)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    first_blob, neutral, colour, entry = markers
+    F = det.n_frames
+    K = cands.mirror_blob.shape[1]
+    taken = [np.zeros(len(det.frame[v]), bool) for v in range(K + 1)]
+    claimed = first_pass.candidate[first_pass.candidate >= 0]
+    taken[0][cands.direct[claimed]] = True
+    for k in range(K):
+        mb = cands.mirror_blob[claimed, k]
+        taken[k + 1][mb[mb >= 0]] = True
+    free = ~taken[0][cands.direct]
+    for k in range(K):
+        mb = cands.mirror_blob[:, k]
+        free &= (mb < 0) | ~taken[k + 1][np.maximum(mb, 0)]
+    idx = np.flatnonzero(free)
+    if idx.size < min_frames:
+        return markers
+    f = cands.frame[idx]
+    pose = first_pass.head_pose[f]
+    R = rotation_zyx(pose[:, :3])  # (M, 3, 3)
+    head = np.einsum("mji,mj->mi", R, cands.points[idx] - pose[:, 3:])  # R^T (X - T)
+    col = det.colour[0][cands.direct[idx]]
+    pairs = _pairs_frames_apart(np.c_[head, col * COLOUR_SPACING_MM], f, link_mm, link_frames)
+    n_comp, comp = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                                   shape=(idx.size, idx.size)), directed=False)
+    # frames per chain (a chain may hold two candidates of one frame: count frames once)
+    key = np.unique(comp * (F + 1) + f)
+    support = np.bincount(key // (F + 1), minlength=n_comp)
+    # a true pair sits in the band every frame both blobs are seen, as close as the
+    # detection noise allows; a chance alignment drifts in and out, anywhere in the band
+    first_f = np.full(n_comp, F)
+    last_f = np.full(n_comp, -1)
+    np.minimum.at(first_f, comp, f)
+    np.maximum.at(last_f, comp, f)
+    rms = np.sqrt(np.bincount(comp, cands.residual_px[idx] ** 2, minlength=n_comp) / np.bincount(comp, minlength=n_comp))
+    true_rms = np.sqrt(np.mean(cands.residual_px[claimed] ** 2)) if claimed.size else np.inf
+    good = np.flatnonzero((support >= min_frames) & (support >= min_support * (last_f - first_f + 1))
+                          & (rms <= max_rms_factor * true_rms))
+    if good.size == 0:
+        return markers
+    # a chain that mostly runs along an existing marker is that marker: near it in 3D (frames
+    # the first pass missed it in), or on its image (its direct blob with a wrong mirror blob).
+    # Markers that will not earn their place (wrong pairings, lost for good) do not count.
+    member = np.flatnonzero(np.isin(comp, good))
+    real = earns_place(first_pass.assigned_blob >= 0, s.min_measured_frames, s.min_measured_fraction)
+    d = _nearest_same_frame(first_pass.head_frame[:, real], f[member], head[member], same_marker_mm)
+    seen = first_pass.points[:, real]
+    rays = seen[..., :2] / np.where(seen[..., 2:] > 1e-9, seen[..., 2:], np.nan)
+    d_px = _nearest_same_frame(rays, f[member], det.norm[0][cands.direct[idx[member]]],
+                               same_ray_px / focal_px) * focal_px
+    near_existing = np.bincount(comp[member], (d <= same_marker_mm) | (d_px <= same_ray_px), minlength=n_comp)
+    good = good[near_existing[good] < 0.5 * np.bincount(comp[member], minlength=n_comp)[good]]
+    if good.size == 0:
+        return markers
+    # one blob is one marker: chains sharing a blob (a marker's chain and its chance
+    # pairings with another unclaimed blob) compete, and the best supported one wins
+    cand_of = idx[member]
+    blob_keys = [cands.direct[cand_of]] + [cands.mirror_blob[cand_of, k] for k in range(K)]
+    used = [np.zeros(len(det.frame[v]), bool) for v in range(K + 1)]
+    by_chain = np.argsort(comp[member], kind="stable")
+    bounds = np.searchsorted(comp[member][by_chain], np.arange(n_comp + 1))
+    order = np.lexsort((np.arange(idx.size), f, comp))
+    first_of = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]  # each chain's first candidate
+    entry_of = np.full(n_comp, -1)
+    entry_of[comp[first_of]] = first_of
+    # where each chain's marker sits in the neutral face: where it first shows, less its
+    # neighbours' motion then -- two chains of one marker (split by a long gap) land together
+    q_of = entry_of[good]
+    at_rest = np.full((n_comp, 3), np.nan)
+    at_rest[good] = head[q_of] - _motion_near(first_pass, real, head[q_of], f[q_of], s.neighbour_radius_mm)
+    keep, seen_from = [], {}
+    for c in good[np.argsort(-support[good], kind="stable")]:  # the chains left (tens), best supported first
+        rows = by_chain[bounds[c]:bounds[c + 1]]
+        blobs = [key[rows] for key in blob_keys]
+        if any(used[v][b[b >= 0]].any() for v, b in enumerate(blobs)):
+            continue
+        if real.any() and np.min(np.linalg.norm(neutral[real] - at_rest[c], axis=1)) <= same_marker_mm:
+            continue
+        if keep:
+            gap = np.linalg.norm(at_rest[keep] - at_rest[c], axis=1)
+            if gap.min() <= same_marker_mm:  # another stretch of a marker kept: it is seen from then
+                same = keep[int(np.argmin(gap))]
+                seen_from[same] = min(seen_from[same], first_f[c])
+                continue
+        for v, b in enumerate(blobs):
+            used[v][b[b >= 0]] = True
+        keep.append(c)
+        seen_from[c] = first_f[c]
+    keep.sort(key=lambda c: (seen_from[c], entry_of[c]))  # markers in order of appearance
+    if not keep:
+        return markers
+    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
+            np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
+
+
+def _frame_spaced(points, frame, within: float, *extent) -> np.ndarray:
+    """``points`` ``(M, D)`` with the ``frame`` number ``(M,)`` as one more coordinate, in
+    steps far larger than ``within`` and than any coordinate of ``points`` or of the other
+    arrays in ``extent``: a KD-tree over such points pairs only points of the frames meant."""
+    spacing = 10.0 * (sum(np.abs(a).max() for a in (points, *extent)) + within + 1.0)
+    return np.c_[points, np.asarray(frame) * spacing]
+
+
+def _pairs_frames_apart(points, frame, within: float, max_gap: int) -> np.ndarray:
+    """Pairs ``(P, 2)`` of ``points`` ``(M, D)`` within ``within`` of each other whose
+    ``frame`` numbers are 1 to ``max_gap`` apart (earlier first). Per gap one KD-tree
+    query against the points shifted by the gap (:func:`_frame_spaced`): a blob that sits
+    still over the take gives pairs with the few frames next to it, not with all of them."""
+    from scipy.spatial import cKDTree
+
+    if len(points) == 0:
+        return np.zeros((0, 2), int)
+    tree = cKDTree(_frame_spaced(points, frame, within))
+    out = []
+    for gap in range(1, max_gap + 1):
+        later = cKDTree(_frame_spaced(points, frame - gap, within))
+        pairs = tree.sparse_distance_matrix(later, within, output_type="ndarray")
+        out.append(np.c_[pairs["i"], pairs["j"]])
+    return np.concatenate(out).astype(int)
+
+
+def _nearest_same_frame(tracked, frame, query, within: float) -> np.ndarray:
+    """Distance from each ``query`` point ``(M, D)`` to the nearest of the ``tracked``
+    points ``(F, N, D)`` (NaN: not tracked) of its own ``frame`` ``(M,)``; ``inf`` where
+    none lies within ``within``. One KD-tree over every frame (:func:`_frame_spaced`)."""
+    from scipy.spatial import cKDTree
+
+    F, N, D = tracked.shape
+    ok = np.isfinite(tracked).all(axis=2)
+    if not ok.any() or len(query) == 0:
+        return np.full(len(query), np.inf)
+    frames = np.broadcast_to(np.arange(F)[:, None], (F, N))
+    tree = cKDTree(_frame_spaced(tracked[ok], frames[ok], within, query))
+    dist, _ = tree.query(_frame_spaced(query, frame, within, tracked[ok]),
+                         distance_upper_bound=within * (1 + 1e-9) + 1e-12)
+    return dist
+
+
+def _motion_near(first_pass, real, where, frame, radius_mm: float, kc: float = 1.0):
+    """The expression motion at ``where`` ``(M, 3)`` (head frame) in ``frame`` ``(M,)``:
+    eq. 5.8's weighted combination of the motions of the ``real`` markers of
+    ``first_pass`` within ``radius_mm`` (zero where none was measured). A late marker's
+    neutral position is where it first shows minus this motion, so that its own motion,
+    like every other marker's, is measured from the neutral face (the neighbour test
+    of eq. 5.6-5.7 and the conjectures compare motions)."""
+    near = first_pass.neutral[real]  # (R, 3)
+    d = np.linalg.norm(near[None] - where[:, None], axis=2)  # (M, R)
+    motion = first_pass.head_frame[frame][:, real] - near[None]  # (M, R, 3)
+    w = np.where((d <= radius_mm) & np.isfinite(motion[..., 0]), 1.0 / (d + kc), 0.0)
+    total = w.sum(axis=1, keepdims=True)
+    return np.einsum("mr,mrd->md", w, np.nan_to_num(motion)) / np.where(total > 0, total, 1.0)

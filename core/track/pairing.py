@@ -1,0 +1,173 @@
+"""Pairing direct and mirrored markers through 2D tracks (issue 4, step 3).
+
+Single-frame pairing inside the mirrored epipolar band (eq. 5.1-5.3) is only
+75-94 % correct on dense layouts: a marker seen only directly and a different
+marker seen only in the mirror can sit on each other's band with the same colour
+(``shared/notes/mirror-self-calibration.md``). Over several frames such chance
+alignments do not persist, so pairs are decided between *tracks*:
+
+1. :func:`track_2d` links each view's detections frame to frame (constant-velocity
+   prediction, same colour, a gate in pixels, one-to-one by
+   ``linear_sum_assignment``), tolerating short gaps;
+2. :func:`pair_tracks` scores every same-colour (direct track, mirror track) pair by
+   how often and how closely it sits in the band over the frames both tracks
+   exist, and assigns pairs one-to-one; what cannot be decided is reported with
+   its ambiguity rather than forced.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.camera import Camera
+from ..geometry.epipolar import mirrored_epipolar_lines
+from ..geometry.mirror import MirrorPlane
+
+
+def track_2d(positions, colors, gate_px: float = 8.0, max_gap: int = 2):
+    """Link detections of one view over frames.
+
+    ``positions``: list over frames of ``(n_f, 2)`` pixel arrays; ``colors``: list of
+    ``(n_f,)`` class indices. Returns a list of ``(n_f,)`` track ids (``-1`` never
+    happens: every detection starts or continues a track) and the number of tracks."""
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial import cKDTree
+
+    last = np.zeros((0, 2))
+    vel = np.zeros((0, 2))
+    col = np.zeros(0, int)
+    seen = np.zeros(0, int)  # frame a track was last matched
+    ids_per_frame = []
+    for f, (xy, c) in enumerate(zip(positions, colors)):
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        c = np.asarray(c, int)
+        ids = np.full(len(xy), -1)
+        active = np.flatnonzero(f - seen <= max_gap + 1) if len(seen) else np.zeros(0, int)
+        if active.size and len(xy):
+            pred = last[active] + vel[active] * (f - seen[active])[:, None]
+            pairs = cKDTree(xy).query_ball_point(pred, gate_px)
+            rows = np.repeat(np.arange(active.size), [len(p) for p in pairs])
+            cols = np.concatenate([np.asarray(p, int) for p in pairs]) if rows.size else np.zeros(0, int)
+            same = col[active[rows]] == c[cols]
+            rows, cols = rows[same], cols[same]
+            if rows.size:
+                ur, rinv = np.unique(rows, return_inverse=True)
+                uc, cinv = np.unique(cols, return_inverse=True)
+                cost = np.full((ur.size, uc.size), 1e9)
+                cost[rinv, cinv] = np.linalg.norm(pred[rows] - xy[cols], axis=1)
+                r, k = linear_sum_assignment(cost)
+                ok = cost[r, k] < 1e9
+                t = active[ur[r[ok]]]
+                d = uc[k[ok]]
+                dt = (f - seen[t])[:, None]
+                vel[t] = (xy[d] - last[t]) / dt
+                last[t] = xy[d]
+                seen[t] = f
+                ids[d] = t
+        new = np.flatnonzero(ids < 0)
+        if new.size:
+            start = len(last)
+            last = np.vstack([last, xy[new]])
+            vel = np.vstack([vel, np.zeros((new.size, 2))])
+            col = np.concatenate([col, c[new]])
+            seen = np.concatenate([seen, np.full(new.size, f)])
+            ids[new] = start + np.arange(new.size)
+        ids_per_frame.append(ids)
+    return ids_per_frame, len(last)
+
+
+@dataclass
+class TrackPairs:
+    direct_track: np.ndarray  # (P,) paired direct-view track ids
+    mirror_track: np.ndarray  # (P,) their mirror track ids
+    rms_px: np.ndarray  # (P,) band residual over the frames they were paired
+    support: np.ndarray  # (P,) frames in which the pair sat in the band
+    ambiguous: np.ndarray  # direct tracks with more than one plausible partner, left unpaired
+
+
+def pair_tracks(direct_xy, direct_ids, mirror_xy, mirror_ids, direct_color, mirror_color, camera: Camera,
+                plane: MirrorPlane, band_px: float = 1.0, min_frames: int = 5, min_agreement: float = 0.8,
+                ambiguity_ratio: float = 0.5, max_rms_factor: float = 2.0) -> TrackPairs:
+    """Pair direct-view tracks with tracks of one mirror (module docstring).
+
+    Per frame, same-colour detections within ``band_px`` of each other's mirrored
+    epipolar line vote for their tracks' pair (perpendicular distance, eq. 5.2). A
+    track pair qualifies when it sat in the band in at least ``min_frames`` frames
+    and in ``min_agreement`` of the frames both tracks exist. Assignment is one-to-one
+    by RMS residual. A direct track whose second-best qualifying partner has more than
+    ``ambiguity_ratio`` of the best one's support is ambiguous and left unpaired.
+    Finally a pair whose RMS residual exceeds ``max_rms_factor`` times the median
+    RMS of all pairs is rejected: for a true pair the RMS over n >= 5 frames, in
+    units of the detection noise, follows sqrt(chi2_n / n), whose 99.9 % quantile is
+    about 2.0 -- chance alignments of two different markers sit further out."""
+    from scipy.optimize import linear_sum_assignment
+
+    keys, sq = [], []
+    n_mt = 1 + max((int(m.max()) for m in mirror_ids if len(m)), default=0)
+    for dxy, did, dcol, mxy, mid, mcol in zip(direct_xy, direct_ids, direct_color, mirror_xy, mirror_ids,
+                                             mirror_color):
+        if len(dxy) == 0 or len(mxy) == 0:
+            continue
+        lines = mirrored_epipolar_lines(np.asarray(dxy), camera, plane)  # (n_d, 3), undistorted px
+        q = camera.ideal_pixels(camera.normalize(np.asarray(mxy)))  # (n_m, 2)
+        dist = np.abs(lines[:, None, 0] * q[None, :, 0] + lines[:, None, 1] * q[None, :, 1] + lines[:, None, 2])
+        i, j = np.nonzero((dist <= band_px) & (np.asarray(dcol)[:, None] == np.asarray(mcol)[None, :]))
+        keys.append(np.asarray(did)[i] * n_mt + np.asarray(mid)[j])
+        sq.append(dist[i, j] ** 2)
+    if not keys:
+        empty = np.zeros(0, int)
+        return TrackPairs(empty, empty, np.zeros(0), empty, empty)
+    keys = np.concatenate(keys)
+    sq = np.concatenate(sq)
+    uk, inv = np.unique(keys, return_inverse=True)
+    support = np.bincount(inv)
+    rms = np.sqrt(np.bincount(inv, sq) / support)
+    dt, mt = uk // n_mt, uk % n_mt
+    # frames in which both tracks exist: a product of (frame x track) presence matrices
+    both = np.asarray(_presence(direct_ids).T.dot(_presence(mirror_ids)).tocsr()[dt, mt]).ravel()
+    ok = (support >= min_frames) & (support >= min_agreement * both)
+    dt, mt, rms, support = dt[ok], mt[ok], rms[ok], support[ok]
+    if rms.size:
+        close = rms <= max_rms_factor * np.median(rms)
+        dt, mt, rms, support = dt[close], mt[close], rms[close], support[close]
+    # ambiguity: a rival partner with comparable support (best and second best per direct track)
+    order = np.lexsort((-support, dt))
+    ds_sorted, sup_sorted = dt[order], support[order]
+    starts = np.flatnonzero(np.r_[True, ds_sorted[1:] != ds_sorted[:-1]])
+    sizes = np.diff(np.r_[starts, ds_sorted.size])
+    rival = sizes > 1
+    if ds_sorted.size:
+        second = sup_sorted[np.minimum(starts + 1, ds_sorted.size - 1)]
+        ambiguous = ds_sorted[starts][rival & (second > ambiguity_ratio * sup_sorted[starts])]
+    else:
+        ambiguous = np.zeros(0, int)
+    keep = ~np.isin(dt, ambiguous)
+    dt, mt, rms, support = dt[keep], mt[keep], rms[keep], support[keep]
+    if dt.size == 0:
+        empty = np.zeros(0, int)
+        return TrackPairs(empty, empty, np.zeros(0), empty, ambiguous)
+    ud, dinv = np.unique(dt, return_inverse=True)
+    um, minv = np.unique(mt, return_inverse=True)
+    cost = np.full((ud.size, um.size), 1e9)
+    cost[dinv, minv] = rms - 1e-3 * support  # prefer closer, then longer-supported pairs
+    r, c = linear_sum_assignment(cost)
+    good = cost[r, c] < 1e9
+    index = np.full(cost.shape, -1)
+    index[dinv, minv] = np.arange(dt.size)
+    pick = index[r[good], c[good]]  # rows come sorted, so pairs stay in direct-track order
+    return TrackPairs(dt[pick], mt[pick], rms[pick], support[pick], ambiguous)
+
+
+def _presence(ids_per_frame):
+    """Sparse (frames x tracks) matrix: 1 where a track has a detection in a frame."""
+    from scipy.sparse import csr_matrix
+
+    frames = np.concatenate([np.full(len(ids), f) for f, ids in enumerate(ids_per_frame)])
+    tracks = np.concatenate([np.asarray(ids, int) for ids in ids_per_frame])
+    n_tracks = int(tracks.max()) + 1 if tracks.size else 1
+    m = csr_matrix((np.ones(tracks.size), (frames, tracks)), shape=(len(ids_per_frame), n_tracks))
+    m.sum_duplicates()
+    m.data[:] = 1.0
+    return m

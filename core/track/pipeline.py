@@ -1,0 +1,184 @@
+"""Rig video -> TAKE.c3d + REPORT.json (``mirrorcap track``).
+
+The stages in order: marker detection (``core.detect``), mirror planes (from
+MIRRORS.json, else self-calibrated from the first frames' markers, ``core.selfcal``),
+tracking (``core.track``), an optional known-length scale, and the outputs, written
+together atomically.
+
+Without MIRRORS.json the take's units are "relative": self-calibration has no scale, so the
+face is put ``face_distance_mm`` (600) from the camera, which makes the units close to mm;
+``--known-length`` makes them exact.
+
+REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
+self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (count,
+labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file",
+"settings" (the add-on's) or "automatic"; ``undecided``: direct-view markers of the first frames that could not be
+paired with a mirror image and were not found later, each with the frame and pixel position
+where it was first seen, its colour class index, the frames it was seen in and the
+``reason``: "no mirror partner" or "ambiguous in mirror K" -- rival partners); ``head_pose`` (per frame
+``[rx, ry, rz, tx, ty, tz]``, radians and output units, eq. 5.4, relative to the first
+frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
+``conflicts``, ``conjectured``, ``withheld``: conjectures left as gaps, expected off by more than
+the limit); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
+tracker stage, ``tracking_frames_per_s``).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..capture.markers import ColorClasses, ExtractionSettings
+from ..capture.rig import ViewLayout
+from ..capture.video import VideoSource
+from ..common.log import MessageLog
+from ..common.errors import DegenerateError, InputError
+from ..common.files import write_files_atomically
+from ..geometry.camera import Camera
+from ..geometry.mirror import MirrorPlane
+from ..take.c3d import c3d_bytes
+from .tracker import TrackSettings, track
+
+SELFCAL_FRAMES = 10
+FACE_DISTANCE_MM = 600.0   # nominal camera-to-face distance that fixes a self-calibrated take's scale
+
+
+@dataclass
+class FrameDets:
+    """One frame's detections per view (pixels, colour-class indices)."""
+
+    direct: np.ndarray
+    direct_color: np.ndarray
+    mirror: list = field(default_factory=list)
+    mirror_color: list = field(default_factory=list)
+
+
+def collect_detections(stream) -> tuple[list, list]:
+    """Frame numbers and :class:`FrameDets` from a :class:`core.detect.DetectionStream`."""
+    numbers, frames = [], []
+    for n, det, view in stream:
+        pick = [view == v for v in range(3)]
+        xy = np.c_[det.x, det.y]
+        frames.append(FrameDets(direct=xy[pick[0]], direct_color=det.color[pick[0]],
+                                mirror=[xy[pick[1]], xy[pick[2]]], mirror_color=[det.color[pick[1]], det.color[pick[2]]]))
+        numbers.append(n)
+    return numbers, frames
+
+
+def run_track(source: VideoSource, camera: Camera, output, *, report=None, colors: ColorClasses | None = None,
+              extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
+              known_length=None, start: int = 0, end: int | None = None, step: int = 1,
+              settings: TrackSettings | None = None, progress=None, track_progress=None,
+              face_distance_mm: float = FACE_DISTANCE_MM, rigid=None, rigid_source: str = "rig file",
+              log: MessageLog | None = None) -> dict:
+    """Track ``source`` and write the take (C3D) and its report (JSON). ``progress(frames_read)``
+    is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
+    ``rigid`` names the markers that carry the head pose, as :func:`..capture.rig.rigid_selection` gives
+    them (``rigid_source`` says where they came from, for the report)."""
+    from ..capture.detect import DetectionStream, _check_camera
+
+    _check_camera(camera, source)
+    t0 = time.perf_counter()
+    stream = DetectionStream(source, colors or ColorClasses.default(), extraction or ExtractionSettings(), layout,
+                             start, end, step, progress)
+    numbers, frames = collect_detections(stream)
+    t_detect = time.perf_counter() - t0
+    return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
+                            known_length=known_length, step=step, settings=settings, progress=track_progress,
+                            timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
+                            rigid_source=rigid_source, log=log)
+
+
+def _median_depth(frames, camera: Camera, cals, ds) -> float:
+    """Median depth of the 3D candidates of ``frames`` under self-calibrated planes."""
+    from .candidates import frame_candidates
+
+    normals = [c.plane.normal for c in cals]
+    z = []
+    for fr in frames:
+        cand = frame_candidates(camera.normalize(fr.direct), fr.direct_color, [camera.normalize(m) for m in fr.mirror],
+                                fr.mirror_color, normals, ds, camera.focal_px)
+        z.append(cand.points[:, 2])
+    z = np.concatenate(z) if z else np.zeros(0)
+    z = z[np.isfinite(z) & (z > 0)]
+    if z.size == 0:
+        raise DegenerateError("no marker pairs between the direct view and the mirrors: cannot place the face")
+    return float(np.median(z))
+
+
+def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
+                     known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
+                     timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
+                     rigid_source: str = "rig file", log: MessageLog | None = None) -> dict:
+    """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
+    e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
+    ``rigid``: the markers that carry the head pose, as :func:`core.track.track` takes them.
+    Without MIRRORS.json the scale is set by putting the face ``face_distance_mm`` away.
+    Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``."""
+    from .selfcal import link_self_calibrated, self_calibrate_mirror
+
+    if len(frames) < 2:
+        raise InputError("tracking needs at least 2 frames")
+    if mirrors is None:
+        if any(len(f.mirror[k]) < 6 for f in frames[:SELFCAL_FRAMES] for k in range(2)):
+            raise DegenerateError("a mirror shows fewer than 6 markers in the first frames: are both mirrors "
+                                  "visible? (give MIRRORS.json from `mirrorcap mirrors` otherwise)")
+        cals = [self_calibrate_mirror(frames[:SELFCAL_FRAMES], camera, k) for k in range(2)]
+        ds = link_self_calibrated(frames[:SELFCAL_FRAMES], camera, cals)
+        # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
+        # levels are in mm, so put the face at its nominal distance: the take is then
+        # "relative" units that are close to millimetres (a known length makes them exact).
+        ds = ds * (face_distance_mm / _median_depth(frames[:SELFCAL_FRAMES], camera, cals, ds))
+        planes = [MirrorPlane(normal=c.plane.normal, d=float(d)) for c, d in zip(cals, ds)]
+        mirror_source, units = "self-calibration", "relative"
+    else:
+        planes, mirror_source, units = list(mirrors), "file", "mm"
+    t1 = time.perf_counter()
+    result = track(frames, camera, planes, settings, progress=progress, rigid=rigid)
+    t_track = time.perf_counter() - t1
+    points = result.points
+    head = result.head_pose.copy()
+    if known_length is not None:
+        a, b, mm = known_length
+        try:
+            ia, ib = result.labels.index(a), result.labels.index(b)
+        except ValueError:
+            raise InputError(f"--known-length names a marker that is not in the take ({a!r}, {b!r}); labels run "
+                             f"{result.labels[0]}..{result.labels[-1]}") from None
+        est = float(np.linalg.norm(result.neutral[ia] - result.neutral[ib]))
+        if not (mm > 0 and est > 0):
+            raise InputError("--known-length needs two distinct markers and a positive length")
+        scale = mm / est
+        points = points * scale
+        head[:, 3:] *= scale
+        planes = [MirrorPlane(normal=p.normal, d=p.d * scale) for p in planes]
+        units = "mm"
+    rate = fps
+    log = log if log is not None else MessageLog()
+    if result.undecided:
+        log.warning(f"{len(result.undecided)} direct-view markers of the first frames could not be paired with a "
+                    "mirror image (no 3D position): REPORT.json markers.undecided lists where they are")
+    report_data = {
+        "units": units,
+        "mirrors": [{"mirror": k, "normal": [float(v) for v in p.normal], "d": float(p.d), "source": mirror_source}
+                    for k, p in enumerate(planes)],
+        "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
+        "markers": {"count": len(result.labels), "labels": result.labels,
+                    "rigid": [result.labels[i] for i in result.rigid],
+                    "rigid_source": "automatic" if rigid is None else rigid_source,
+                    "undecided": result.undecided},
+        "head_pose": head.tolist(),
+        "per_frame": {k: v.tolist() for k, v in result.stats.items()},
+        "timings_s": {**(timings or {}), "track": t_track, "track_stages": result.timings,
+                      "tracking_frames_per_s": len(frames) / max(t_track, 1e-9)},
+        "warnings": log.warnings,
+    }
+    files = {output: c3d_bytes(result.labels, points, rate, units=units if units == "mm" else "rel",
+                               camera_mask=result.camera_mask, conjectured=result.conjectured)}
+    if report is not None:
+        files[report] = json.dumps(report_data, indent=1) + "\n"
+    write_files_atomically(files)
+    return report_data

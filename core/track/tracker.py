@@ -1,0 +1,483 @@
+"""Detections over time -> labelled 3D marker trajectories with head motion separated
+(Lin 2003, section 5.3 and "the motion tracking procedure" at the end of chapter 5).
+
+Steps, per the procedure:
+
+1. (given) camera and mirror planes -- from ``core.selfcal`` or ``mirrorcap mirrors``;
+2. the neutral structure at the first frame: markers are direct-view 2D tracks paired
+   with mirror tracks over the first ``init_frames`` frames (``core.pairing``);
+3-4. per frame, 3D candidates from the band (``core.candidates``);
+5. head motion: a robust rigid fit of the neutral structure to the tracked markers
+   (iteratively reweighted, so expression motion counts little -- the idea of
+   weight-compensated motion estimation, seed 003 section 3.3), filtered by the
+   adaptive Kalman filter on the six pose parameters of eq. 5.4-5.5;
+6. markers predicted by their own Kalman filters (eq. 4.1-4.2) in the head frame,
+   assigned one-to-one to candidates within a gate; false tracking by the neighbour
+   test (eq. 5.6-5.7); conflicts (one 2D blob claimed twice) keep the marker closest
+   to its prediction;
+7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
+   whole take known, again from relations to their neighbours learned over the take
+   (``core.motion.learned_conjectures``), meeting the measurements at both ends of a gap;
+8. the Kalman filters give the reported positions.
+
+Everything is vectorised over markers; the loop is over frames.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..common.errors import DegenerateError
+from ..geometry.camera import Camera
+from ..geometry.mirror import MirrorPlane, points_from_planes
+from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
+from .candidates import ClipCandidates, ClipDetections, clip_candidates
+from .late import add_late_markers
+from .motion import (
+    ConstantVelocityKalman,
+    conjecture_gaps,
+    conjecture_motion,
+    conjecture_since_last_seen,
+    false_tracking,
+    grown_sd,
+    neighbours,
+    previous_and_next,
+)
+from .pairing import pair_tracks, track_2d
+from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
+
+
+def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int):
+    """2D tracks of the direct view and of each mirror over ``frames``, and each direct
+    track's partner track per mirror (``core.pairing``; -1: none). Returns
+    ``(direct ids per frame, number of direct tracks, partner (K, n), mirror ids per
+    frame per mirror, ambiguous (K, n): tracks with rival partners in that mirror)``."""
+    dids, n_dt = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
+    K = len(normals)
+    partner = np.full((K, n_dt), -1)
+    ambiguous = np.zeros((K, n_dt), bool)
+    mids_all = []
+    for k in range(K):
+        mids, _ = track_2d([f.mirror[k] for f in frames], [f.mirror_color[k] for f in frames])
+        pairs = pair_tracks([f.direct for f in frames], dids, [f.mirror[k] for f in frames], mids,
+                            [f.direct_color for f in frames], [f.mirror_color[k] for f in frames], camera,
+                            MirrorPlane(normal=normals[k], d=float(ds[k])), band_px=band_px, min_frames=min_frames)
+        partner[k, pairs.direct_track] = pairs.mirror_track
+        ambiguous[k, pairs.ambiguous] = True
+        mids_all.append(mids)
+    return dids, n_dt, partner, mids_all, ambiguous
+
+
+def _undecided(frames, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
+    """Direct-view tracks of the first frames, seen in at least ``min_frames`` of them,
+    that no mirror track was paired with: markers whose 3D position cannot be decided
+    (procedure step 2). Per track: where it was first seen (frame, x, y px), its colour
+    class, the frames it was seen in, and why -- ``ambiguous`` (rival partners in a
+    mirror: the mirrors listed) or ``no mirror partner``."""
+    seen = np.zeros(n_dt, int)
+    first = np.full(n_dt, -1)
+    xy = np.zeros((n_dt, 2))
+    colour = np.zeros(n_dt, int)
+    for f in range(len(frames) - 1, -1, -1):  # backwards: the earliest sighting is written last
+        ids = np.asarray(dids[f], int)
+        if ids.size == 0:
+            continue
+        seen[ids] += 1
+        first[ids] = f
+        xy[ids] = np.asarray(frames[f].direct, float)
+        colour[ids] = np.asarray(frames[f].direct_color)
+    tracks = np.flatnonzero((seen >= min_frames) & np.all(partner < 0, axis=0))
+    return {"track": tracks, "frame": first[tracks], "xy": xy[tracks], "colour": colour[tracks],
+            "frames_seen": seen[tracks], "ambiguous_in": ambiguous[:, tracks].T}
+
+
+def _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all, tracks):
+    """3D position of chosen direct tracks in every frame where the track and one of
+    its partner mirror tracks both have a blob (fused over mirrors): ``pos (F, M, 3)``
+    (NaN elsewhere, each frame's own camera coordinates), the direct blob per frame
+    ``(F, M)`` (-1: absent) and each track's colour ``(M,)``. Vectorised per frame
+    through lookup arrays."""
+    F, M, K = len(frames), len(tracks), len(normals)
+    col_of = np.full(n_dt, -1)
+    col_of[tracks] = np.arange(M)
+    n_mt = [1 + max((int(m.max()) for m in mids_all[k] if len(m)), default=0) for k in range(K)]
+    pos = np.full((F, M, 3), np.nan)
+    blob = np.full((F, M), -1)
+    colour = np.full(M, -1)
+    for f in range(F):
+        here = col_of[dids[f]] if len(dids[f]) else np.zeros(0, int)
+        sel = np.flatnonzero(here >= 0)
+        if sel.size == 0:
+            continue
+        marker = here[sel]
+        blob[f, marker] = sel
+        unset = colour[marker] < 0
+        colour[marker[unset]] = np.asarray(frames[f].direct_color)[sel[unset]]
+        vis = np.zeros((K, sel.size), bool)
+        pm = np.zeros((K, sel.size, 2))
+        for k in range(K):
+            blob_of = np.full(n_mt[k], -1)
+            blob_of[mids_all[k][f]] = np.arange(len(mids_all[k][f]))
+            mate = partner[k, tracks[marker]]
+            j = np.where(mate >= 0, blob_of[np.maximum(mate, 0)], -1)
+            vis[k] = j >= 0
+            if vis[k].any():
+                pm[k, vis[k]] = camera.normalize(frames[f].mirror[k][j[vis[k]]])
+        ok = vis.any(axis=0)
+        if ok.any():
+            pos[f, marker[ok]] = points_from_planes(camera.normalize(frames[f].direct[sel[ok]]), pm[:, ok],
+                                                    normals, ds, visible=vis[:, ok])
+    return pos, blob, colour
+
+
+def _initial_markers(frames, camera, normals, ds, settings):
+    """Step 2: markers are direct-view tracks paired with a mirror track over the first
+    ``init_frames`` frames. Each marker's neutral position is its 3D position at the
+    first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
+    markers both frames share (so markers hidden at frame 0 are tracked too).
+    Returns each marker's frame-0 direct blob (-1 if absent), the neutral structure
+    (N, 3), the markers' colour classes (N,) and the frame each is measured from (N,),
+    here 0; and the undecided direct-view tracks (:func:`_undecided`)."""
+    W = min(settings.init_frames, len(frames))
+    init = frames[:W]
+    dids, n_dt, partner, mids_all, ambiguous = _paired_tracks(init, camera, normals, ds, settings.band_px,
+                                                               min(5, W))
+    undecided = _undecided(init, dids, n_dt, partner, ambiguous, min(5, W))
+    undecided["blobs"] = [np.asarray(d, int) for d in dids]  # track id of each direct blob, per frame
+    tracks = np.flatnonzero(np.any(partner >= 0, axis=0))
+    if tracks.size < 10:
+        raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
+                              "in the first frames; are both mirrors visible and calibrated?")
+    pos, blob, colour = _track_positions(init, camera, normals, ds, dids, n_dt, partner, mids_all, tracks)
+    neutral = pos[0].copy()
+    known = np.all(np.isfinite(neutral), axis=1)
+    for f in range(1, W):
+        new = ~known & np.all(np.isfinite(pos[f]), axis=1)
+        common = known & np.all(np.isfinite(pos[f]), axis=1)
+        if new.any() and common.sum() >= 6:
+            R, T, _ = robust_rigid_fit(pos[f, common], neutral[common])  # frame f -> frame 0
+            neutral[new] = pos[f, new] @ R.T + T
+            known |= new
+    keep = np.flatnonzero(known)
+    return (blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)), undecided
+
+
+def track(frames, camera: Camera, planes, settings: TrackSettings | None = None, progress=None,
+          rigid=None) -> TrackResult:
+    """Track the markers of ``frames`` (objects with ``direct``, ``direct_color``,
+    ``mirror[k]``, ``mirror_color[k]`` in pixels, e.g. :class:`core.simulate.FrameDetections`)
+    given the ``camera`` and mirror ``planes`` (``MirrorPlane`` or ``(normal, d)``).
+
+    Head motion comes from ``rigid`` markers: indices into the result's markers, or a
+    ``(region, colour classes)`` pair (:func:`rigid_by_image`) naming them by where they
+    are in the first frame's image and/or their colour (at least 4 must match). When
+    not given they are found automatically: a first pass estimates the pose from all
+    markers (robustly), then the ``rigid_fraction`` of markers that moved least
+    relative to the head -- forehead, nose bridge, temples on a real face -- carry the
+    pose in a second pass.
+
+    The detections are flattened and undistorted once, and the 3D candidates of every
+    frame are found in one vectorised pass (``core.candidates.clip_candidates``) before
+    the frame loop."""
+    s = settings or TrackSettings()
+    normals = np.stack([np.asarray(getattr(pl, "normal", pl[0] if isinstance(pl, tuple) else None), float)
+                        for pl in planes])
+    ds = np.array([float(getattr(pl, "d", pl[1] if isinstance(pl, tuple) else np.nan)) for pl in planes])
+    if len(frames) < 2:
+        raise DegenerateError("tracking needs at least 2 frames")
+    clock = [time.perf_counter()]
+    timings = {}
+
+    def lap(name):
+        clock.append(time.perf_counter())
+        timings[name] = clock[-1] - clock[-2]
+
+    markers, undecided = _initial_markers(frames, camera, normals, ds, s)
+    n_initial = len(markers[1])
+    lap("initial_markers")
+    det = ClipDetections.from_frames(frames, camera)
+    z_mid = float(np.median(markers[1][:, 2]))
+    cands = clip_candidates(det, normals, ds, camera.focal_px, s.band_px,
+                            (z_mid - s.depth_margin_mm, z_mid + s.depth_margin_mm))
+    lap("candidates")
+    by_image = isinstance(rigid, tuple)
+    given = (rigid_by_image(camera, markers[1], markers[2], *rigid) if by_image
+             else None if rigid is None else np.asarray(rigid, int))
+    first = _track_pass(det, cands, s, markers, given, None)
+    lap("first_pass")
+    if given is None:
+        with np.errstate(invalid="ignore"):  # markers never reported: no motion to rank
+            motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
+        if np.isfinite(motion).sum() < 4:
+            raise DegenerateError("no rigid markers found: fewer than 4 markers were followed through the take; "
+                                  "name them in RIG.json (\"rigid\") or check the detections")
+        motion = np.where(np.isfinite(motion), motion, np.inf)
+        n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
+        given = np.argsort(motion)[:n_rigid]
+    markers = add_late_markers(det, cands, s, markers, first, camera.focal_px)
+    if by_image:  # markers found later may be rigid too
+        given = rigid_by_image(camera, markers[1], markers[2], *rigid)
+    lap("late_markers")
+    result = _track_pass(det, cands, s, markers, given, progress)
+    result.rigid = given
+    result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
+    result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
+    lap("final_pass")
+    _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
+    lap("gap_fill")
+    result.undecided = _still_undecided(undecided, result)
+    result.timings = timings
+    return result
+
+
+def _still_undecided(undecided: dict, result: TrackResult) -> list:
+    """The undecided direct-view tracks of the first frames that the tracker did not
+    take up later (no blob of theirs became a marker's measurement), as report rows."""
+    blobs = undecided.pop("blobs")
+    taken = np.zeros(len(undecided["track"]), bool)
+    for f, ids in enumerate(blobs):
+        used = result.assigned_blob[f][result.assigned_blob[f] >= 0]
+        taken |= np.isin(undecided["track"], ids[used[used < len(ids)]])
+    rows = []
+    for i in np.flatnonzero(~taken):
+        mirrors = np.flatnonzero(undecided["ambiguous_in"][i]).tolist()
+        rows.append({"frame": int(undecided["frame"][i]), "x": round(float(undecided["xy"][i, 0]), 2),
+                     "y": round(float(undecided["xy"][i, 1]), 2), "colour": int(undecided["colour"][i]),
+                     "frames_seen": int(undecided["frames_seen"][i]),
+                     "reason": f"ambiguous in mirror {', '.join(map(str, mirrors))}" if mirrors
+                     else "no mirror partner"})
+    return rows
+
+
+def rigid_by_image(camera: Camera, neutral, colour, region=None, colours=None) -> np.ndarray:
+    """Indices of the markers whose neutral position projects into ``region`` ``(x0, y0,
+    x1, y1)`` (pixels, the first frame's image) and whose colour class is in ``colours``
+    (either None: no condition). Fewer than 4 is an error: the head pose needs them."""
+    ok = np.ones(len(neutral), bool)
+    if region is not None:
+        px = camera.project(np.asarray(neutral, float))
+        x0, y0, x1, y1 = region
+        ok &= (px[:, 0] >= x0) & (px[:, 0] < x1) & (px[:, 1] >= y0) & (px[:, 1] < y1)
+    if colours is not None:
+        ok &= np.isin(colour, list(colours))
+    if ok.sum() < 4:
+        raise DegenerateError(f"only {int(ok.sum())} markers match the rigid markers named (RIG.json \"rigid\": "
+                              f"region {region}, colour classes {colours}); at least 4 are needed to follow the head")
+    return np.flatnonzero(ok)
+
+
+def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_neighbours: int = 12,
+               ridge_mm2: float = 1.0, min_frames: int = 10, max_sd_mm: float = np.inf) -> None:
+    """Conjectures redone with the whole take known (it is offline).
+
+    1. Learned neighbour relations (:func:`core.motion.learned_conjectures`, eq. 5.8
+       with each pair's relation fitted on the frames where both were measured; the
+       ``learned_neighbours`` nearest within ``radius_mm``): a marker's motion at ``t``
+       from the neighbours measured at ``t``. The prediction's error where the marker
+       is measured, at the two ends of its gap, is blended linearly across the gap and
+       taken off, so the conjecture meets the measurements at both ends (at the one end
+       of a gap still open at the end of the take).
+    2. Where no neighbour with a learned relation is measured: eq. 5.8 from both ends of
+       the gap -- the marker's motion at its last measurement ``a`` plus its neighbours'
+       motion since (eq. 5.8 weights), and the same from its next measurement ``b``,
+       blended linearly across the gap. A gap still open at the end of the take keeps
+       the pass's conjecture there.
+    3. Each conjecture's expected error: the standard deviation of its learned estimate
+       (the relations' residuals) grown as a random walk with the frames to the nearest
+       measurement of the marker, ``sd * sqrt(frames)`` (cells of step 2: the take's
+       median ``sd``). A conjecture expected to be off by more than ``max_sd_mm`` is
+       withheld: the marker is left as a gap there (``stats["withheld"]`` per frame).
+
+    Updates ``points``, ``head_frame`` and ``conjectured`` in place."""
+    measured = result.assigned_blob >= 0
+    F = measured.shape[0]
+    motion = result.head_frame - result.neutral[None]  # (F, N, 3), NaN where not reported
+    gaps = result.conjectured & np.isfinite(motion[..., 0])
+    rows = np.flatnonzero(gaps.any(axis=0))
+    result.stats["withheld"] = np.zeros(F, int)
+    result.stats["conjectured"] = result.conjectured.sum(axis=1)
+    if rows.size == 0:
+        return
+    nidx, ndist = neighbours(result.neutral, radius_mm)
+    learned_motion, sd = conjecture_gaps(motion, measured, gaps, nidx[:, :learned_neighbours], ridge_mm2, min_frames)
+    learned = np.isfinite(sd)
+    new_motion = np.where(learned[..., None], learned_motion, motion)
+
+    last, nxt = previous_and_next(measured)
+    rest = gaps & ~learned
+    t, i = np.nonzero(rest & (last >= 0) & (nxt < F))
+    if t.size:
+        a, b = last[t, i], nxt[t, i]
+        j = np.maximum(nidx[i], 0)  # (M, K)
+        ok = (nidx[i] >= 0) & measured[t[:, None], j]
+        ok &= np.isfinite(motion[a[:, None], j, 0]) & np.isfinite(motion[b[:, None], j, 0])
+        w = np.where(ok, 1.0 / (ndist[i] + kc), 0.0)
+        total = np.maximum(w.sum(axis=1), 1e-12)[:, None]
+        now = np.nan_to_num(motion[t[:, None], j])
+
+        def since(anchor):  # the neighbours' weighted motion from the anchor frame to t (zero with none)
+            return np.einsum("mk,mkd->md", w, now - np.nan_to_num(motion[anchor[:, None], j])) / total
+
+        s = ((t - a) / (b - a))[:, None]
+        new_motion[t, i] = (1.0 - s) * (motion[a, i] + since(a)) + s * (motion[b, i] + since(b))
+
+    t, i = np.nonzero(gaps)
+    head = result.neutral[i] + new_motion[t, i]
+    result.head_frame[t, i] = head
+    R = rotation_zyx(result.head_pose[t, :3])
+    result.points[t, i] = np.einsum("mij,mj->mi", R, head) + result.head_pose[t, 3:]
+
+    if np.isfinite(max_sd_mm):
+        typical = np.nanmedian(sd[gaps]) if np.isfinite(sd[gaps]).any() else 0.2
+        frames_off = np.minimum(np.where(last >= 0, np.arange(F)[:, None] - last, F),
+                                np.where(nxt < F, nxt - np.arange(F)[:, None], F))
+        expected = grown_sd(np.where(np.isnan(sd), typical, sd), frames_off)
+        withheld = gaps & (expected > max_sd_mm)
+        result.points[withheld] = np.nan
+        result.head_frame[withheld] = np.nan
+        result.conjectured[withheld] = False
+        result.stats["withheld"] = withheld.sum(axis=1)
+    result.stats["conjectured"] = result.conjectured.sum(axis=1)
+
+
+def _resolve_conflicts(a, near, keys):
+    """Conflicts (procedure step 6): a 2D blob -- direct, or in a mirror -- claimed by
+    two markers in one frame stays with the marker closest to its prediction.
+    ``a`` ``(N,)`` candidate per marker (-1: none), ``near`` its distance, ``keys`` the
+    candidates' blob per view (``(C,)`` each, -1: none). Returns the markers that lost."""
+    valid = a >= 0
+    lost = np.zeros(len(a), bool)
+    if not valid.any():
+        return lost
+    chosen = a[valid]
+    shared = [np.unique(b).size < b.size for b in (key[chosen][key[chosen] >= 0] for key in keys)]
+    if not any(shared):
+        return lost
+    for key, clash in zip(keys, shared):
+        if not clash:
+            continue
+        blob = np.where(valid, key[np.maximum(a, 0)], -1)
+        order = np.lexsort((near, blob))
+        dup = np.r_[False, (blob[order][1:] == blob[order][:-1]) & (blob[order][1:] >= 0)]
+        lost[order[dup]] = True
+        valid &= ~lost
+    return lost
+
+
+def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, rigid, progress) -> TrackResult:
+    """One pass of the procedure over the clip (module docstring, steps 4-8)."""
+    from scipy.spatial import cKDTree
+
+    F = det.n_frames
+    first_blob, neutral, colour, entry = markers
+    N = len(neutral)
+    nidx, ndist = neighbours(neutral, s.neighbour_radius_mm)
+    kf = ConstantVelocityKalman.start(neutral, accel_sigma=s.accel_sigma_mm, initial_sigma=s.measure_sigma_mm)
+    pose_kf = ConstantVelocityKalman.start(np.zeros((2, 3)), accel_sigma=s.pose_accel_sigma,
+                                           initial_sigma=0.0)  # rotation (rad), translation (mm): exact at frame 0
+    pose_sigma = np.asarray(s.pose_measure_sigma, float)
+    points = np.full((F, N, 3), np.nan)
+    head_frame = np.full((F, N, 3), np.nan)
+    history = np.full((F, N, 3), np.nan)  # head-frame motion per frame, for conjectures since a last sighting
+    last_motion = np.zeros((N, 3))  # each marker's motion at its last measurement
+    last_frame = np.full(N, -1)
+    innovation = np.full(N, s.gate_mm / 4.0)  # per marker, moving average; starts at the widest gate
+    conjectured = np.zeros((F, N), bool)
+    camera_mask = np.zeros((F, N), np.int8)
+    head_pose = np.zeros((F, 6))
+    assigned_blob = np.full((F, N), -1)
+    candidate = np.full((F, N), -1)
+    counts = {k: np.zeros(F, int) for k in ("candidates", "measured", "false_tracking", "conflicts", "conjectured")}
+    is_rigid = np.ones(N, bool) if rigid is None else np.isin(np.arange(N), rigid)
+    pose_weights = np.ones(N)  # robust weights, carried from frame to frame
+    cand_key = np.c_[cands.points, det.colour[0][cands.direct] * COLOUR_SPACING_MM]
+    query = np.c_[neutral, colour * COLOUR_SPACING_MM]
+    K = cands.mirror_blob.shape[1]
+    keys = [cands.direct] + [cands.mirror_blob[:, k] for k in range(K)]
+    view_bit = (2 ** np.arange(1, K + 1))[None, :]
+    trees = {}
+
+    def tree(u):
+        """Frame ``u``'s candidates as a KD-tree (None: none), built once and kept while in use."""
+        if u not in trees:
+            su = cands.at(u)
+            trees[u] = cKDTree(cand_key[su]) if su.stop > su.start else None
+            trees.pop(u - 5, None)
+        return trees[u]
+
+    for t in range(F):
+        sl = cands.at(t)
+        counts["candidates"][t] = sl.stop - sl.start
+        pose_pred = pose_kf.predict()
+        R_p, T_p = rotation_zyx(pose_pred[0]), pose_pred[1]
+        query[:, :3] = kf.predict() @ R_p.T + T_p
+        # each marker's gate follows how well it has been predicted lately: tight where
+        # predictions are good (fewer chance candidates), wide where the face moves fast
+        gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
+        if sl.stop > sl.start:
+            near, j = tree(t).query(query, distance_upper_bound=s.gate_mm)
+            valid = (near <= gate_i) & (entry <= t)  # a late marker is measured from its first sighting on
+            a = np.where(valid, j + sl.start, -1)
+            back = np.flatnonzero(valid & (last_frame < t - 1)) if t > 0 else np.zeros(0, int)
+            if back.size:  # coming back after a gap: only to a candidate that lasts
+                lasts = np.zeros(back.size, bool)
+                for u in (t - 1, t + 1, t - 2, t + 2):
+                    if 0 <= u < F and tree(u) is not None and not lasts.all():
+                        r = s.reacquire_mm * abs(u - t)
+                        lasts |= tree(u).query(cand_key[a[back]], distance_upper_bound=r)[0] <= r
+                valid[back[~lasts]] = False
+                a = np.where(valid, a, -1)
+            lost = _resolve_conflicts(a, near, keys)
+            counts["conflicts"][t] = lost.sum()
+            valid &= ~lost
+        else:
+            valid, a, near = np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf)
+        meas_cam = cands.points[np.maximum(a, 0)] if len(cands.points) else np.zeros((N, 3))
+        use = valid & is_rigid
+        if use.sum() >= 4:
+            R_m, T_m, w = robust_rigid_fit(neutral[use], meas_cam[use], iterations=1, weights=pose_weights[use])
+            pose_weights[use] = w
+            pose_kf.update(np.stack([angles_zyx(R_m), T_m]), pose_sigma)
+        R, T = rotation_zyx(pose_kf.position[0]), pose_kf.position[1]
+        head_pose[t] = pose_kf.position.ravel()
+        meas_h = (meas_cam - T) @ R  # R^T (x - T): head motion removed
+        motion = np.where(valid[:, None], meas_h - neutral, 0.0)
+        false, _ = false_tracking(motion, valid, nidx, threshold=s.false_threshold)
+        counts["false_tracking"][t] = false.sum()
+        valid &= ~false
+        motion[~valid] = np.nan
+        innovation[valid] = 0.8 * innovation[valid] + 0.2 * near[valid]
+        # markers seen before: their own last motion plus the neighbours' motion since;
+        # never seen (or no such neighbour): eq. 5.8 from the neighbours' motion now
+        filled_motion, filled = conjecture_since_last_seen(motion, valid, nidx, ndist, last_motion, last_frame,
+                                                           history)
+        if (~valid & ~filled).any():
+            now, filled_now = conjecture_motion(motion, valid, nidx, ndist, only=~filled)
+            filled_motion = np.where(filled_now[:, None], now, filled_motion)
+            filled |= filled_now
+        reported = valid | filled
+        z = np.where(valid[:, None], meas_h, neutral + filled_motion)
+        out_h = kf.update(z, np.where(valid, s.measure_sigma_mm, s.conjecture_sigma_mm), reported)
+        last_motion[valid] = motion[valid]
+        last_frame[valid] = t
+        kf.velocity[~reported] = 0.0  # lost and not conjecturable: hold still rather than drift away
+        out_h = np.where(reported[:, None], out_h, np.nan)
+        head_frame[t] = out_h
+        history[t] = out_h - neutral
+        points[t] = out_h @ R.T + T
+        conjectured[t] = filled
+        counts["conjectured"][t] = filled.sum()
+        counts["measured"][t] = valid.sum()
+        if valid.any():
+            blobs = cands.mirror_blob[a[valid]]
+            camera_mask[t, valid] = 1 | ((blobs >= 0) * view_bit).sum(axis=1)
+            assigned_blob[t, valid] = cands.direct[a[valid]] - det.start[0][t]
+            candidate[t, valid] = a[valid]
+        if progress:
+            progress(t + 1, F)
+    labels = [f"m{i:03d}" for i in range(N)]
+    return TrackResult(labels=labels, points=points, conjectured=conjectured, camera_mask=camera_mask.astype(int),
+                       head_pose=head_pose, neutral=neutral, first_blob=first_blob, assigned_blob=assigned_blob,
+                       colour=colour, head_frame=head_frame, candidate=candidate, stats=counts)

@@ -1,0 +1,77 @@
+"""Scoring a tracked take against ground truth (the sample clip's, or a synthetic one's).
+
+The tracker's labels (``m000``..) are its own, and a self-calibrated take is in relative
+units: a global scale about the camera centre. Projections into the image do not see that
+scale, so identities are found in the image:
+
+1. each tracked marker's true identity is the majority, over the frames where it was
+   measured, of the true marker whose projection is nearest to its own (within
+   ``match_px``);
+2. an identity switch is a measured marker-frame whose nearest true marker is another
+   one (``off_marker`` counts those nearest their own true marker but more than
+   ``match_px`` from it: the right marker, measured badly -- an error, not a switch);
+3. one similarity transform (Umeyama), fitted over every measured marker-frame of the
+   clip, brings the take onto the truth; the 3D error is what remains, in truth units (mm).
+   Conjectured points are scored separately under the same transform.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.common.errors import InputError
+from ..core.geometry.camera import Camera
+from ..core.geometry.rigid import similarity_fit
+
+
+def score_take(points, truth, camera: Camera, conjectured=None, match_px: float = 2.0) -> dict:
+    """``points (F, M, 3)`` tracked (NaN gaps), ``truth (F, N, 3)`` mm; returns a dict of
+    figures (see the module text) plus ``ids (M,)`` (-1: no true marker) and
+    ``aligned (F, M, 3)``."""
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(points, float)
+    T = np.asarray(truth, float)
+    if P.ndim != 3 or T.ndim != 3 or P.shape[0] != T.shape[0]:
+        raise InputError(f"take {P.shape} and truth {T.shape} must both be (frames, markers, 3) over the same frames")
+    F, M, _ = P.shape
+    conj = np.zeros((F, M), bool) if conjectured is None else np.asarray(conjectured, bool)
+    reported = np.all(np.isfinite(P), axis=2)
+    measured = reported & ~conj
+    nearest = np.full((F, M), -1)  # nearest true marker, at any distance
+    near_px = np.full((F, M), np.inf)
+    for f in range(F):
+        idx = np.flatnonzero(reported[f])
+        seen = np.flatnonzero(np.all(np.isfinite(T[f]), axis=1))
+        if idx.size == 0 or seen.size == 0:
+            continue
+        d, j = cKDTree(camera.project(T[f, seen])).query(camera.project(P[f, idx]))
+        nearest[f, idx], near_px[f, idx] = seen[j], d
+    ids = np.full(M, -1)
+    for m in range(M):
+        v = nearest[measured[:, m] & (near_px[:, m] <= match_px), m]
+        if v.size:
+            ids[m] = np.bincount(v).argmax()
+    switches = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest != ids[None, :])))
+    off_marker = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest == ids[None, :])
+                                      & (near_px > match_px)))
+    ok = measured & (ids[None, :] >= 0)
+    if ok.sum() < 3:
+        raise InputError("fewer than 3 tracked points match the truth: nothing to score")
+    f_idx, m_idx = np.nonzero(ok)
+    s, R, t = similarity_fit(P[f_idx, m_idx], T[f_idx, ids[m_idx]])
+    aligned = s * P @ R.T + t
+    err = np.linalg.norm(aligned - T[:, np.maximum(ids, 0)], axis=2)
+    e = err[ok]
+    cj = conj & reported & (ids[None, :] >= 0)
+    ce = err[cj]
+    return {
+        "markers_tracked": M, "markers_true": int(T.shape[1]), "markers_matched": int(np.count_nonzero(ids >= 0)),
+        "identity_switches": switches, "off_marker": off_marker, "measured_marker_frames": int(measured.sum()),
+        "reported_fraction": float(reported.mean()),
+        "rms_mm": float(np.sqrt(np.mean(e ** 2))), "p95_mm": float(np.percentile(e, 95)), "max_mm": float(e.max()),
+        "conjectured": int(cj.sum()),
+        "conjectured_rms_mm": float(np.sqrt(np.mean(ce ** 2))) if ce.size else 0.0,
+        "conjectured_max_mm": float(ce.max()) if ce.size else 0.0,
+        "scale_to_mm": s, "ids": ids, "aligned": aligned, "error_mm": err,
+    }

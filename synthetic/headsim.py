@@ -1,0 +1,121 @@
+"""Synthetic performances on a head, for tests and benchmarks of the rig and the bake.
+
+A performance is a sum of expression channels, each a fixed mix of the head's
+ARKit-named faceunit shape keys (e.g. ``smile`` = both ``mouthSmile`` and half of
+both ``cheekSquint``), with smooth random weights over time. Markers sit on skin
+vertices spread by farthest-point sampling over the face regions, plus one on each
+landmark (labelled ``lm_<name>``); the take is the markers' positions under the
+performance and a rigid head motion, 600 mm in front of the camera.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.common.errors import InputError
+from ..core.face.head import REGIONS, HeadModel, farthest_points
+from ..core.geometry.rigid import rotation_zyx
+
+EXPRESSIONS = {
+    "open": {"jawOpen": 0.6, "mouthLowerDownLeft": 0.3, "mouthLowerDownRight": 0.3},
+    "smile": {"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0, "cheekSquintLeft": 0.5, "cheekSquintRight": 0.5},
+    "pucker": {"mouthPucker": 1.0, "mouthFunnel": 0.4},
+    "brows": {"browInnerUp": 1.0, "browOuterUpLeft": 0.6, "browOuterUpRight": 0.6},
+    "frown": {"browDownLeft": 1.0, "browDownRight": 1.0, "noseSneerLeft": 0.5, "noseSneerRight": 0.5},
+    "twist": {"mouthLeft": 1.0, "mouthSmileLeft": 0.3},
+    "press": {"mouthPressLeft": 1.0, "mouthPressRight": 1.0, "mouthShrugLower": 0.5},
+    "stretch": {"mouthStretchLeft": 1.0, "mouthStretchRight": 1.0, "mouthUpperUpLeft": 0.4, "mouthUpperUpRight": 0.4},
+}
+#: the remaining non-eye faceunits, one channel each: a richer performance for the error-vs-K table
+SINGLE_UNITS = ("cheekPuff", "jawForward", "jawLeft", "jawRight", "mouthClose", "mouthDimpleLeft", "mouthDimpleRight",
+                "mouthFrownLeft", "mouthFrownRight", "mouthRight", "mouthRollLower", "mouthRollUpper",
+                "mouthShrugUpper", "eyeSquintLeft", "eyeSquintRight", "eyeWideLeft", "eyeWideRight")
+
+
+def channel_weights(n_frames: int, fps: float, n_channels: int, seed: int = 0, events_per_s: float = 0.6):
+    """Smooth weights ``(F, C)`` in [0, 1]: random raised-cosine events (0.4-1.2 s long),
+    none before 0.1 s, so the first frame is the neutral face."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_frames) / fps
+    W = np.zeros((n_frames, n_channels))
+    T = n_frames / fps
+    for c in range(n_channels):
+        n_ev = rng.poisson(events_per_s * T / max(n_channels / 4, 1)) + 1
+        starts = rng.uniform(0.1, max(T - 0.2, 0.2), n_ev)
+        lengths = rng.uniform(0.4, 1.2, n_ev)
+        amps = rng.uniform(0.3, 1.0, n_ev)
+        s = (t[:, None] - starts) / lengths
+        bump = np.where((s >= 0) & (s <= 1), 0.5 - 0.5 * np.cos(2 * np.pi * s), 0.0) * amps
+        W[:, c] = np.clip(bump.sum(1), 0, 1)
+    return W
+
+
+def performance(head: HeadModel, shape_keys: dict, n_frames: int, fps: float = 30.0, seed: int = 0,
+                channels: dict | None = None, singles: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex displacements ``(F, V, 3)`` and channel weights ``(F, C)``."""
+    channels = dict(EXPRESSIONS if channels is None else channels)
+    for u in singles:
+        channels[u] = {u: 1.0}
+    missing = sorted({u for mix in channels.values() for u in mix} - set(shape_keys))
+    if missing:
+        raise InputError("the head lacks the shape keys " + ", ".join(missing))
+    basis = np.stack([sum(w * shape_keys[u] for u, w in mix.items()) for mix in channels.values()])  # (C, V, 3)
+    W = channel_weights(n_frames, fps, len(channels), seed)
+    return np.einsum("fc,cvd->fvd", W, basis), W
+
+
+def place_markers(head: HeadModel, n_markers: int, seed: int = 0) -> tuple[np.ndarray, list]:
+    """Marker vertices and labels: every landmark (``lm_<name>``) then farthest-point samples
+    over the front-facing skin of the 11 regions (not the inner lip, eyeballs or teeth)."""
+    lms = head.landmarks()
+    verts = [lms[n] for n in sorted(lms)]
+    labels = [f"lm_{n}" for n in sorted(lms)]
+    region = np.zeros(len(head.vertices), bool)
+    for r in REGIONS:
+        region[head.members(f"region_{r}")] = True
+    region &= head.skin_mask()
+    for side in ("l", "r"):
+        lid = head.groups.get(f"eyelid_upper_{side}")
+        if lid is not None:
+            region[lid > 0] = False  # blinks move the lids; markers there would turn synthetic blinks off
+    normals = head.vertex_normals()
+    ax = head.face_axes()
+    region &= normals @ ax["forward"] > 0.2
+    cand = np.flatnonzero(region)
+    cand = np.setdiff1d(cand, verts)
+    need = n_markers - len(verts)
+    if need > cand.size:
+        raise InputError(f"the head has room for {cand.size + len(verts)} markers, not {n_markers}")
+    P = head.vertices[cand]
+    to_landmarks = np.min(np.linalg.norm(P[:, None] - head.vertices[verts][None], axis=2), axis=1)
+    chosen = farthest_points(P, need, seed, initial_distance=to_landmarks)
+    verts += [int(c) for c in cand[chosen]]
+    labels += [f"m{i:03d}" for i in range(need)]
+    return np.asarray(verts, np.int64), labels
+
+
+def head_motion(n_frames: int, fps: float, max_deg: float = 10.0, seed: int = 0):
+    """A smooth rigid head motion: ``R (F, 3, 3)``, ``t (F, 3)`` mm, starting at identity."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_frames) / fps
+    freq = rng.uniform(0.1, 0.4, (3, 1))
+    phase = rng.uniform(0, 2 * np.pi, (3, 1))
+    ang = np.deg2rad(max_deg) * (np.sin(2 * np.pi * freq * t + phase) - np.sin(phase)).T / 2
+    R = rotation_zyx(ang)
+    trans = 5.0 * (np.sin(2 * np.pi * freq * t + phase) - np.sin(phase)).T
+    return R, trans
+
+
+def synthetic_take(head: HeadModel, shape_keys: dict, n_markers: int = 150, n_frames: int = 90, fps: float = 30.0,
+                   max_head_deg: float = 10.0, seed: int = 0, singles: tuple = ()):
+    """``labels, points (F, M, 3)`` in the camera frame (head 600 mm away, turned by a smooth
+    motion), the marker vertices, the true vertex displacements ``(F, V, 3)`` and the head pose
+    ``(F, 3, 4)`` (camera = R q + t for head-frame q)."""
+    verts, labels = place_markers(head, n_markers, seed)
+    disp, _ = performance(head, shape_keys, n_frames, fps, seed, singles=singles)
+    q = head.vertices[verts][None] + disp[:, verts]
+    R, t = head_motion(n_frames, fps, max_head_deg, seed)
+    t = t + np.array([0.0, 0.0, 600.0])
+    pts = np.einsum("fij,fmj->fmi", R, q) + t[:, None]
+    pose = np.concatenate([R, t[:, :, None]], axis=2)
+    return labels, pts, verts, disp, pose
