@@ -5,7 +5,7 @@ scan of the same face. The demo runs the product end to end, as a user would:
 
 1. ``track``   clip.mp4 -> take.c3d + take_report.json (markers, self-calibrated mirrors,
                3D tracking with head motion removed); scored against the clip's truth
-               (:func:`core.evaluate.score_take`);
+               (:func:`synthetic.evaluate.score_take`);
 2. ``fit``     the generic head -> the sample scan (landmarks from the scan's JSON);
 3. ``bind``    the take to the fitted head by its skin surface (the take's markers carry
                no landmark labels);

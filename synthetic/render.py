@@ -137,7 +137,7 @@ def match_detections(det_x, det_y, det_view, truth: FrameTruth, max_px: float = 
 
 # ------------------------------------------------------------ calibration boards
 def board_texture(board, px_per_mm: float = 4.0):
-    """A printable image of ``board`` (a :class:`core.calibrate.Board`) with a white
+    """A printable image of ``board`` (a :class:`core.capture.calibrate.Board`) with a white
     margin of one square, and the 3x3 matrix mapping board millimetres (origin at
     the first inner corner for a chessboard, at the board corner for ChArUco) to
     texture pixels."""
@@ -210,7 +210,7 @@ def render_board_views(camera: Camera, board, n_views: int, rng=None, distance_m
 def rig_clip_frames(rig, n_frames: int, settings: RenderSettings | None = None, seed: int = 0,
                     class_rgb=None, head_motion_deg: float = 3.0):
     """Yield ``(frame_number, bgr image, FrameTruth)`` for a synthetic clip of a
-    :class:`core.simulate.FaceRig`: the face turns gently (a sinusoid of
+    :class:`synthetic.simulate.FaceRig`: the face turns gently (a sinusoid of
     ``head_motion_deg``) about its centre; visibility per view is recomputed from the
     surface normals each frame. Colours cycle through ``class_rgb`` (default: the
     four blacklight classes)."""

@@ -1,6 +1,6 @@
 """Baking a take onto a head as shape keys (``mirrorcap bake`` and ``MIRRORCAP_OT_bake``).
 
-Data flow: TAKE.c3d -> :func:`core.bind.bind_take` -> :class:`core.facerig.FaceRig`
+Data flow: TAKE.c3d -> :func:`core.face.bind.bind_take` -> :class:`core.face.facerig.FaceRig`
 -> displacements ``(F, V, 3)`` -> shape keys here. Shape-key coordinates go through
 ``foreach_set``; keyframes through ``keyframe_points.foreach_set``. Blender has no
 call that creates many shape keys or F-curves at once, so there is one
@@ -8,7 +8,7 @@ call that creates many shape keys or F-curves at once, so there is one
 
 ``frames``: key ``frame_00001`` .. one per take frame, its value keyed 0-1-0 with
 constant interpolation so exactly that frame's key is 1 at its frame.
-``pca``: keys ``mode_01`` .. ``mode_K`` (eigen-deformations, see :mod:`core.shapes`) with
+``pca``: keys ``mode_01`` .. ``mode_K`` (eigen-deformations, see :mod:`core.face.shapes`) with
 linear-interpolated value keys on every frame; slider range -1..1.
 Head motion (optional): the object's location and quaternion rotation keyed per frame.
 """
@@ -132,7 +132,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
              conjecture_unseen: bool = False) -> dict:
     """The whole ``mirrorcap bake``: read, bind, rig, bake, save atomically. Returns the report.
     Markers not seen in the neutral frame: refused, left out (``drop_unseen``) or placed from
-    their neighbours (``conjecture_unseen``, :func:`core.bind.bind_take`)."""
+    their neighbours (``conjecture_unseen``, :func:`core.face.bind.bind_take`)."""
     if mode not in MODES:
         raise InputError(f"--mode must be one of {', '.join(MODES)}")
     timings = {}

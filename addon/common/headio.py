@@ -1,4 +1,4 @@
-"""Heads in Blender: a mesh object with MirrorCap's vertex groups <-> :class:`core.head.HeadModel`.
+"""Heads in Blender: a mesh object with MirrorCap's vertex groups <-> :class:`core.face.head.HeadModel`.
 
 Writing uses ``foreach_set`` for vertices, loops, polygons and shape keys, and one
 ``VertexGroup.add`` call per distinct weight. Reading vertex groups is the one

@@ -1,7 +1,7 @@
 """Long work as cancellable jobs: one operator base class for every MirrorCap operator.
 
 Every operator derives from :class:`MirrorCapOperator` (after MPFB2): its work raises, and
-the base class turns a :class:`core.errors.MirrorCapError` into a ``self.report`` error (any
+the base class turns a :class:`core.common.errors.MirrorCapError` into a ``self.report`` error (any
 other exception into an "internal error" report, its traceback on the console) and returns
 ``{'CANCELLED'}`` -- unless ``MIRRORCAP_RAISE=1`` (the tests), when it propagates.
 

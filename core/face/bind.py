@@ -14,7 +14,7 @@
    Gaps (NaN: a marker the tracker did not measure, nor conjecture with confidence) are
    filled in time first (for the head motion), then in the head frame from the
    neighbours' motion through relations learned over the take
-   (:func:`core.motion.conjecture_gaps`, eq. 5.8 per pair), where a related neighbour is
+   (:func:`core.track.motion.conjecture_gaps`, eq. 5.8 per pair), where a related neighbour is
    measured: the face needs every marker every frame.
 3. Every other marker binds to its nearest head vertex on the skin (not eyeballs,
    teeth or the inner lip), one marker per vertex (linear assignment).
@@ -179,7 +179,7 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     Markers not seen in the neutral frame are an error, or with ``unseen="drop"`` are left
     out (``Binding.dropped``; a tracker's markers first seen later in the take). With
     ``unseen="conjecture"`` their neutral-frame position is conjectured from the neighbours'
-    learned relations (:func:`core.motion.conjecture_gaps`, the gap reaching back from
+    learned relations (:func:`core.track.motion.conjecture_gaps`, the gap reaching back from
     their first sighting) and they are bound like the others (``Binding.conjectured_neutral``);
     one whose conjecture is expected off by more than ``unseen_limit_mm`` (3 sigma: the
     relations' sd grown with the square root of the frames to its first sighting) is left

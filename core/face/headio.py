@@ -5,7 +5,7 @@ Arrays (all lengths in millimetres, the core's frame):
 ``vertices``        float64 (V, 3) neutral positions
 ``polygons``        int64 flat vertex indices of every polygon
 ``polygon_sizes``   int64 (P,) corners per polygon
-``group_names``     str (G,) vertex-group names (see :mod:`core.head`)
+``group_names``     str (G,) vertex-group names (see :mod:`core.face.head`)
 ``group_weights``   float32 (G, V) their weights
 ``hinge``           float64 (2, 3), optional: explicit jaw hinge points (left, right)
 ``key_names``       str (K,), optional: shape-key names

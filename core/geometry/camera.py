@@ -9,7 +9,7 @@ Conventions (used across the core):
   millimetres once a scale is known.
 * *Normalised* coordinates are undistorted image coordinates with focal length
   1 (``x_n = X/Z``, ``y_n = Y/Z``) -- the "normalised camera" of Lin (2003), ch. 3,
-  where ``f = 1``. Every geometric algorithm in :mod:`core.mirror` works on them.
+  where ``f = 1``. Every geometric algorithm in :mod:`core.geometry.mirror` works on them.
 
 CAMERA.json format::
 

@@ -15,12 +15,12 @@ From real-vs-mirrored correspondences alone this module recovers
 
 Two layers:
 
-* kernels on *normalised* coordinates (``f = 1``; see :mod:`core.camera`):
+* kernels on *normalised* coordinates (``f = 1``; see :mod:`core.geometry.camera`):
   :func:`correspondence_matrix`, :func:`normal_from_correspondences`,
   :func:`depths_from_planes`, :func:`points_from_planes`, ...
   Everything is vectorised: points ``(..., N, 2)``, mirrors stacked on a leading
   axis ``(K, ..., N, 2)``.
-* pixel front-ends taking an OpenCV :class:`~core.camera.Camera`:
+* pixel front-ends taking an OpenCV :class:`~core.geometry.camera.Camera`:
   :func:`estimate_mirror_plane`, :func:`reconstruct_points`,
   :func:`.epipolar.mirrored_epipolar_lines`, :func:`.epipolar.in_mirrored_epipolar_band`.
 

@@ -41,7 +41,7 @@ class ClipDetections:
     @classmethod
     def from_frames(cls, frames, camera) -> "ClipDetections":
         """From per-frame objects with ``direct``, ``direct_color``, ``mirror[k]`` and
-        ``mirror_color[k]`` (e.g. :class:`core.simulate.FrameDetections`)."""
+        ``mirror_color[k]`` (e.g. :class:`synthetic.simulate.FrameDetections`)."""
         F = len(frames)
         K = len(frames[0].mirror) if F else 0
         xy, norm, colour, frame, start = [], [], [], [], []

@@ -25,7 +25,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     ``min_frames`` frames, and in ``min_support`` of the frames it spans, with an RMS
     band residual within ``max_rms_factor`` of the tracked markers', is a marker (a
     chance alignment of two markers' blobs drifts in and out of the band, anywhere
-    in it: ``core.pairing`` has the same test). A chain that mostly runs within ``same_marker_mm`` of an existing marker, or
+    in it: ``core.track.pairing`` has the same test). A chain that mostly runs within ``same_marker_mm`` of an existing marker, or
     within ``same_ray_px`` of its image (its direct blob, paired with a wrong mirror
     blob), is that marker found again and is not added; nor is one whose neutral
     position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a

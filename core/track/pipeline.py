@@ -1,7 +1,7 @@
 """Rig video -> TAKE.c3d + REPORT.json (``mirrorcap track``).
 
-The stages in order: marker detection (``core.detect``), mirror planes (from
-MIRRORS.json, else self-calibrated from the first frames' markers, ``core.selfcal``),
+The stages in order: marker detection (``core.capture.detect``), mirror planes (from
+MIRRORS.json, else self-calibrated from the first frames' markers, ``core.track.selfcal``),
 tracking (``core.track``), an optional known-length scale, and the outputs, written
 together atomically.
 
@@ -57,7 +57,7 @@ class FrameDets:
 
 
 def collect_detections(stream) -> tuple[list, list]:
-    """Frame numbers and :class:`FrameDets` from a :class:`core.detect.DetectionStream`."""
+    """Frame numbers and :class:`FrameDets` from a :class:`core.capture.detect.DetectionStream`."""
     numbers, frames = [], []
     for n, det, view in stream:
         pick = [view == v for v in range(3)]
@@ -115,7 +115,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                      rigid_source: str = "rig file", log: MessageLog | None = None) -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
-    ``rigid``: the markers that carry the head pose, as :func:`core.track.track` takes them.
+    ``rigid``: the markers that carry the head pose, as :func:`core.track.tracker.track` takes them.
     Without MIRRORS.json the scale is set by putting the face ``face_distance_mm`` away.
     Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``."""
     from .selfcal import link_self_calibrated, self_calibrate_mirror

@@ -50,7 +50,7 @@ class TrackResult:
     assigned_blob: np.ndarray  # (F, N) direct blob index each frame, -1 when not measured
     colour: np.ndarray  # (N,) colour class of each marker
     head_frame: np.ndarray = None  # (F, N, 3) positions with head motion removed (NaN where not reported)
-    candidate: np.ndarray = None  # (F, N) the clip candidate each marker took (core.candidates.ClipCandidates), -1: none
+    candidate: np.ndarray = None  # (F, N) the clip candidate each marker took (core.track.candidates.ClipCandidates), -1: none
     rigid: np.ndarray = None  # markers that carried the head pose
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)  # seconds per stage of :func:`track`

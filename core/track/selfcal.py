@@ -54,7 +54,7 @@ class Candidates:
 def build_candidates(frames, camera: Camera, mirror: int) -> Candidates:
     """All same-colour pairs per frame; ``frames`` are objects with ``direct``,
     ``direct_color``, ``mirror[k]``, ``mirror_color[k]`` (e.g.
-    :class:`core.simulate.FrameDetections`)."""
+    :class:`synthetic.simulate.FrameDetections`)."""
     parts = []
     d_off = m_off = 0
     for f, fr in enumerate(frames):

@@ -3,10 +3,10 @@
 
 Steps, per the procedure:
 
-1. (given) camera and mirror planes -- from ``core.selfcal`` or ``mirrorcap mirrors``;
+1. (given) camera and mirror planes -- from ``core.track.selfcal`` or ``mirrorcap mirrors``;
 2. the neutral structure at the first frame: markers are direct-view 2D tracks paired
-   with mirror tracks over the first ``init_frames`` frames (``core.pairing``);
-3-4. per frame, 3D candidates from the band (``core.candidates``);
+   with mirror tracks over the first ``init_frames`` frames (``core.track.pairing``);
+3-4. per frame, 3D candidates from the band (``core.track.candidates``);
 5. head motion: a robust rigid fit of the neutral structure to the tracked markers
    (iteratively reweighted, so expression motion counts little -- the idea of
    weight-compensated motion estimation, seed 003 section 3.3), filtered by the
@@ -17,7 +17,7 @@ Steps, per the procedure:
    to its prediction;
 7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
    whole take known, again from relations to their neighbours learned over the take
-   (``core.motion.learned_conjectures``), meeting the measurements at both ends of a gap;
+   (``core.track.motion.learned_conjectures``), meeting the measurements at both ends of a gap;
 8. the Kalman filters give the reported positions.
 
 Everything is vectorised over markers; the loop is over frames.
@@ -51,7 +51,7 @@ from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
 
 def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int):
     """2D tracks of the direct view and of each mirror over ``frames``, and each direct
-    track's partner track per mirror (``core.pairing``; -1: none). Returns
+    track's partner track per mirror (``core.track.pairing``; -1: none). Returns
     ``(direct ids per frame, number of direct tracks, partner (K, n), mirror ids per
     frame per mirror, ambiguous (K, n): tracks with rival partners in that mirror)``."""
     dids, n_dt = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
@@ -167,7 +167,7 @@ def _initial_markers(frames, camera, normals, ds, settings):
 def track(frames, camera: Camera, planes, settings: TrackSettings | None = None, progress=None,
           rigid=None) -> TrackResult:
     """Track the markers of ``frames`` (objects with ``direct``, ``direct_color``,
-    ``mirror[k]``, ``mirror_color[k]`` in pixels, e.g. :class:`core.simulate.FrameDetections`)
+    ``mirror[k]``, ``mirror_color[k]`` in pixels, e.g. :class:`synthetic.simulate.FrameDetections`)
     given the ``camera`` and mirror ``planes`` (``MirrorPlane`` or ``(normal, d)``).
 
     Head motion comes from ``rigid`` markers: indices into the result's markers, or a
@@ -179,7 +179,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     pose in a second pass.
 
     The detections are flattened and undistorted once, and the 3D candidates of every
-    frame are found in one vectorised pass (``core.candidates.clip_candidates``) before
+    frame are found in one vectorised pass (``core.track.candidates.clip_candidates``) before
     the frame loop."""
     s = settings or TrackSettings()
     normals = np.stack([np.asarray(getattr(pl, "normal", pl[0] if isinstance(pl, tuple) else None), float)
@@ -272,7 +272,7 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
                ridge_mm2: float = 1.0, min_frames: int = 10, max_sd_mm: float = np.inf) -> None:
     """Conjectures redone with the whole take known (it is offline).
 
-    1. Learned neighbour relations (:func:`core.motion.learned_conjectures`, eq. 5.8
+    1. Learned neighbour relations (:func:`core.track.motion.learned_conjectures`, eq. 5.8
        with each pair's relation fitted on the frames where both were measured; the
        ``learned_neighbours`` nearest within ``radius_mm``): a marker's motion at ``t``
        from the neighbours measured at ``t``. The prediction's error where the marker
