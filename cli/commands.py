@@ -20,14 +20,8 @@ def reconstruct(args) -> int:
 
     camera = Camera.load(args.camera)
     table = read_pairs(args.pairs)
-    known = None
-    if args.known_length is not None:
-        a, b, mm = args.known_length
-        try:
-            mm = float(mm)
-        except ValueError:
-            raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
-        known = KnownLength(a, b, mm)
+    known = _known_length(args)
+    known = None if known is None else KnownLength(*known)
     result = reconstruct_pairs(table, camera, known_length=known, refine=args.refine,
                                robust=not args.no_ransac, threshold_px=args.threshold, seed=args.seed)
     out = Path(args.output)
@@ -49,6 +43,17 @@ def reconstruct(args) -> int:
         for w in result.warnings:
             print(f"  warning: {w}")
     return 0
+
+
+def _known_length(args) -> tuple | None:
+    """``--known-length A B MM`` as ``(A, B, mm)``, or None when not given."""
+    if not args.known_length:
+        return None
+    a, b, mm = args.known_length
+    try:
+        return a, b, float(mm)
+    except ValueError:
+        raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
 
 
 def _progress_line(text: str, final: bool) -> None:
@@ -124,13 +129,7 @@ def track(args) -> int:
     rig = load_rig(args.rig)
     rigid, rigid_source = rigid_markers((0, 0, 0, 0), (), rig, colors)
     mirrors = load_mirrors(args.mirrors) if args.mirrors else None
-    known = None
-    if args.known_length:
-        a, b, mm = args.known_length
-        try:
-            known = (a, b, float(mm))
-        except ValueError:
-            raise MirrorCapError(f"--known-length: {mm!r} is not a number of millimetres") from None
+    known = _known_length(args)
     if not args.face_distance > 0:
         raise MirrorCapError("--face-distance must be a positive number of millimetres")
     if not args.conjecture_limit >= 0:

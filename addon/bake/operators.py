@@ -115,4 +115,4 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
         return f"baked {out['frames']} frames onto {obj.name}{extra}"
 
 
-OPERATORS = (MIRRORCAP_OT_bind, MIRRORCAP_OT_bake,)
+OPERATORS = (MIRRORCAP_OT_bind, MIRRORCAP_OT_bake)

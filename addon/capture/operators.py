@@ -160,4 +160,4 @@ class MIRRORCAP_OT_solve_mirrors(MirrorCapJobOperator):
         return f"mirror planes from {res.frames_used} frames -> {out.name}"
 
 
-OPERATORS = (MIRRORCAP_OT_open_clip, MIRRORCAP_OT_calibrate_camera, MIRRORCAP_OT_detect_markers, MIRRORCAP_OT_solve_mirrors,)
+OPERATORS = (MIRRORCAP_OT_open_clip, MIRRORCAP_OT_calibrate_camera, MIRRORCAP_OT_detect_markers, MIRRORCAP_OT_solve_mirrors)

@@ -87,4 +87,4 @@ class MIRRORCAP_OT_fit_head(MirrorCapJobOperator):
                 f"(95 % under {fit.residual_p95_mm:.2f} mm), landmarks {fit.landmark_rms_mm:.2f} mm")
 
 
-OPERATORS = (MIRRORCAP_OT_add_generic_head, MIRRORCAP_OT_fit_head,)
+OPERATORS = (MIRRORCAP_OT_add_generic_head, MIRRORCAP_OT_fit_head)

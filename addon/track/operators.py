@@ -64,11 +64,9 @@ class _TrackInputs:
             from ..common.take_io import import_take
 
             import_take(context, take)
-        pf = report["per_frame"]
-        undecided = len(report["markers"].get("undecided", ()))
+        pf = report["per_frame"]  # the run's warnings (undecided markers, ...) follow from the message log
         return (f"{report['markers']['count']} markers over {report['frames']['count']} frames -> {take.name}; "
-                f"{np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured per frame"
-                + (f"; {undecided} markers not paired with a mirror image (no 3D; listed in the report)" if undecided else ""))
+                f"{np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured per frame")
 
 
 class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
@@ -169,4 +167,4 @@ class MIRRORCAP_OT_import_take(MirrorCapOperator):
         return f"imported {len(parent.children)} markers from {path.name}"
 
 
-OPERATORS = (MIRRORCAP_OT_rigid_from_tracks, MIRRORCAP_OT_track, MIRRORCAP_OT_track_clip_tracks, MIRRORCAP_OT_import_take,)
+OPERATORS = (MIRRORCAP_OT_rigid_from_tracks, MIRRORCAP_OT_track, MIRRORCAP_OT_track_clip_tracks, MIRRORCAP_OT_import_take)

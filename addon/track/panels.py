@@ -40,4 +40,4 @@ class MIRRORCAP_PT_take(SidebarPanel, bpy.types.Panel):
         col.operator("mirrorcap.import_take", icon="EMPTY_DATA")
 
 
-PANELS = (MIRRORCAP_PT_track, MIRRORCAP_PT_take,)
+PANELS = (MIRRORCAP_PT_track, MIRRORCAP_PT_take)
