@@ -71,7 +71,8 @@ def test_a_blob_claimed_twice_stays_with_the_closer_prediction():
 def test_clip_band_search_finds_exactly_the_pairs_of_a_full_comparison():
     """The whole-take band search (pencil keys + binary search) must return the same
     (direct, mirror) pairs as testing every pair of every frame against eq. 5.2-5.3."""
-    from mirrorcap.core.track.candidates import ClipDetections, _same_frame_pairs, band_pairs
+    from mirrorcap.core.capture.views import ClipDetections
+    from mirrorcap.core.track.candidates import _same_frame_pairs, band_pairs
 
     rig = face_rig(n_markers=300, seed=3, layout="even")
     _, frames = synthetic_detections(rig, 12, noise_px=0.1, seed=7, missing=0.1, false_blobs=0.5)

@@ -125,7 +125,9 @@ def test_batch_stops_cleanly_on_ctrl_c(demo, tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "mirrorcap", "batch", *map(str, takes), "--head",
                              str(out / "fitted_head.blend"), "--out", str(tmp_path / "baked"), "--workers", "2",
                              "--drop-unseen"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True,
+                            # a shell's background job inherits SIGINT ignored; a user's terminal has it on
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(0.5)                                  # the workers are starting Blender
     os.killpg(proc.pid, signal.SIGINT)               # Ctrl-C in a terminal reaches the whole group
     stdout, stderr = proc.communicate(timeout=60)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mirrorcap.core.geometry.mirror import MirrorPlane
+from mirrorcap.core.capture.views import ClipDetections
 from mirrorcap.core.track.pairing import pair_tracks, track_2d
 from mirrorcap.synthetic.simulate import face_rig, synthetic_detections
 
@@ -41,8 +42,7 @@ def test_track_pairing_is_precise_on_a_dense_layout_with_faults(rig):
         dids, _ = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
         for k in range(2):
             mids, _ = track_2d([f.mirror[k] for f in frames], [f.mirror_color[k] for f in frames])
-            pairs = pair_tracks([f.direct for f in frames], dids, [f.mirror[k] for f in frames], mids,
-                                [f.direct_color for f in frames], [f.mirror_color[k] for f in frames], rig.camera,
+            pairs = pair_tracks(ClipDetections.from_frames(frames, rig.camera), dids, k, mids, rig.camera,
                                 MirrorPlane(*rig.planes[k]))
             dm = _majority(dids, [f.direct_id for f in frames])
             mm = _majority(mids, [f.mirror_id[k] for f in frames])
@@ -65,10 +65,9 @@ def test_single_frames_are_not_enough(rig):
     """The reason for tracks: one frame gives no pairs (min_frames), a short window
     gives fewer than a long one."""
     _, frames = synthetic_detections(rig, 15, noise_px=0.1, seed=3)
-    args = lambda fr: ([f.direct for f in fr], track_2d([f.direct for f in fr], [f.direct_color for f in fr])[0],
-                       [f.mirror[0] for f in fr],
-                       track_2d([f.mirror[0] for f in fr], [f.mirror_color[0] for f in fr])[0],
-                       [f.direct_color for f in fr], [f.mirror_color[0] for f in fr])
+    args = lambda fr: (ClipDetections.from_frames(fr, rig.camera),
+                       track_2d([f.direct for f in fr], [f.direct_color for f in fr])[0], 0,
+                       track_2d([f.mirror[0] for f in fr], [f.mirror_color[0] for f in fr])[0])
     one = pair_tracks(*args(frames[:1]), rig.camera, MirrorPlane(*rig.planes[0]))
     full = pair_tracks(*args(frames), rig.camera, MirrorPlane(*rig.planes[0]))
     assert len(one.direct_track) == 0 and len(full.direct_track) > 100

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mirrorcap.core.geometry.camera import angle_deg
+from mirrorcap.core.capture.views import ClipDetections
 from mirrorcap.core.common.errors import DegenerateError
 from mirrorcap.core.track.selfcal import build_candidates, link_self_calibrated, self_calibrate_mirror
 from mirrorcap.synthetic.simulate import face_rig, synthetic_detections
@@ -17,7 +18,7 @@ def rig():
 
 
 def _precision(frames, rig, k, result):
-    cand = build_candidates(frames, rig.camera, k)
+    cand = build_candidates(ClipDetections.from_frames(frames, rig.camera), k)
     did = np.concatenate([fr.direct_id for fr in frames])
     mid = np.concatenate([fr.mirror_id[k] for fr in frames])
     chosen = np.flatnonzero(result.plane.inliers)

@@ -68,10 +68,10 @@ def _class_of(name: str) -> int:
 
 
 def clip_tracks_to_detections(clip, layout=None, object_name: str | None = None):
-    """Per-frame detections (:class:`core.track.pipeline.FrameDets`) from the clip's tracks: frame numbers
+    """Per-frame detections (:class:`core.capture.views.FrameDets`) from the clip's tracks: frame numbers
     (0-based video frames) and frames. Muted markers are left out; views come from ``layout``
     (a :class:`core.capture.markers.ViewLayout`) or from the gaps between the tracks."""
-    from ...core.track.pipeline import FrameDets
+    from ...core.capture.views import FrameDets
 
     objects = [o for o in clip.tracking.objects if object_name in (None, o.name)]
     if object_name is not None and not objects:

@@ -16,7 +16,13 @@ def mirrored_epipolar_lines(direct_px, camera: Camera, plane: MirrorPlane) -> np
     ``l1 x + l2 y + l3 = 0`` in *undistorted* pixel coordinates
     (:meth:`Camera.ideal_pixels`), scaled so that ``l1^2 + l2^2 = 1``: evaluating a
     line at an undistorted pixel gives the signed distance in pixels."""
-    p_h = _homogeneous(camera.normalize(direct_px))
+    return lines_of_normalised(camera.normalize(direct_px), camera, plane)
+
+
+def lines_of_normalised(direct_n, camera: Camera, plane: MirrorPlane) -> np.ndarray:
+    """:func:`mirrored_epipolar_lines` of direct points already in normalised
+    coordinates ``(..., 2)`` (:class:`core.capture.views.ClipDetections` ``norm``)."""
+    p_h = _homogeneous(np.asarray(direct_n, dtype=float))
     line_n = np.cross(np.asarray(plane.normal, dtype=float), p_h)  # u x p: (b - c y, c x - a, a y - b x)
     line_px = line_n @ np.linalg.inv(camera.K)  # l_px = K^-T l_n, as row vectors
     return line_px / np.linalg.norm(line_px[..., :2], axis=-1, keepdims=True)

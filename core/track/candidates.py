@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..capture.views import ClipDetections
 from ..geometry.mirror import depths_from_planes, points_from_planes
 
 
@@ -20,44 +21,6 @@ class Candidates3D:
     direct: np.ndarray  # (C,) direct blob index
     mirror_blob: np.ndarray  # (C, K) blob index in each mirror, -1 where that mirror has none
     residual_px: np.ndarray  # (C,) largest band distance of its pairs
-
-
-@dataclass
-class ClipDetections:
-    """The detections of a whole clip as flat arrays, one entry per view (0: direct,
-    1..K: mirrors), each sorted by frame: pixels ``xy`` ``(D, 2)``, undistorted
-    normalised coordinates ``norm`` ``(D, 2)`` (one ``Camera.normalize`` call per view
-    for the clip), colour classes ``colour`` ``(D,)``, ``frame`` ``(D,)`` and the offsets
-    ``start`` ``(F + 1,)``: frame ``f`` of view ``v`` is ``start[v][f]:start[v][f + 1]``.
-    A detection's index in its view is its *global* blob index."""
-
-    n_frames: int
-    xy: list
-    norm: list
-    colour: list
-    frame: list
-    start: list
-
-    @classmethod
-    def from_frames(cls, frames, camera) -> "ClipDetections":
-        """From per-frame objects with ``direct``, ``direct_color``, ``mirror[k]`` and
-        ``mirror_color[k]`` (e.g. :class:`synthetic.simulate.FrameDetections`)."""
-        F = len(frames)
-        K = len(frames[0].mirror) if F else 0
-        xy, norm, colour, frame, start = [], [], [], [], []
-        for v in range(K + 1):
-            pos = [np.asarray(f.direct if v == 0 else f.mirror[v - 1], float).reshape(-1, 2) for f in frames]
-            col = [np.asarray(f.direct_color if v == 0 else f.mirror_color[v - 1], int).reshape(-1) for f in frames]
-            counts = np.array([len(p) for p in pos], int)
-            xy.append(np.concatenate(pos) if F else np.zeros((0, 2)))
-            norm.append(camera.normalize(xy[-1]) if len(xy[-1]) else np.zeros((0, 2)))
-            colour.append(np.concatenate(col) if F else np.zeros(0, int))
-            frame.append(np.repeat(np.arange(F), counts))
-            start.append(np.r_[0, np.cumsum(counts)])
-        return cls(F, xy, norm, colour, frame, start)
-
-    def frame_view(self, f: int, v: int) -> slice:
-        return slice(int(self.start[v][f]), int(self.start[v][f + 1]))
 
 
 def _pencil_key(pts, normal):

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.rigid import rotation_zyx
-from .candidates import ClipCandidates, ClipDetections
+from ..capture.views import ClipDetections
+from .candidates import ClipCandidates
 from .result import COLOUR_SPACING_MM, TrackSettings, earns_place
 
 

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..geometry.epipolar import mirrored_epipolar_lines
+from ..capture.views import ClipDetections
+from ..geometry.epipolar import lines_of_normalised
 from ..geometry.mirror import MirrorPlane
 
 
@@ -87,10 +88,12 @@ class TrackPairs:
     ambiguous: np.ndarray  # direct tracks with more than one plausible partner, left unpaired
 
 
-def pair_tracks(direct_xy, direct_ids, mirror_xy, mirror_ids, direct_color, mirror_color, camera: Camera,
-                plane: MirrorPlane, band_px: float = 1.0, min_frames: int = 5, min_agreement: float = 0.8,
+def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera: Camera, plane: MirrorPlane, band_px: float = 1.0, min_frames: int = 5, min_agreement: float = 0.8,
                 ambiguity_ratio: float = 0.5, max_rms_factor: float = 2.0) -> TrackPairs:
-    """Pair direct-view tracks with tracks of one mirror (module docstring).
+    """Pair direct-view tracks with tracks of mirror ``mirror`` (module docstring):
+    ``det`` holds the detections (:class:`..capture.views.ClipDetections`, read in
+    normalised coordinates), ``direct_ids`` and ``mirror_ids`` the 2D track of each
+    detection per frame (:func:`track_2d`).
 
     Per frame, same-colour detections within ``band_px`` of each other's mirrored
     epipolar line vote for their tracks' pair (perpendicular distance, eq. 5.2). A
@@ -106,14 +109,15 @@ def pair_tracks(direct_xy, direct_ids, mirror_xy, mirror_ids, direct_color, mirr
 
     keys, sq = [], []
     n_mt = 1 + max((int(m.max()) for m in mirror_ids if len(m)), default=0)
-    for dxy, did, dcol, mxy, mid, mcol in zip(direct_xy, direct_ids, direct_color, mirror_xy, mirror_ids,
-                                             mirror_color):
-        if len(dxy) == 0 or len(mxy) == 0:
+    v = mirror + 1
+    for dn, did, dcol, mn, mid, mcol in zip(det.per_frame(0, "norm"), direct_ids, det.per_frame(0, "colour"),
+                                            det.per_frame(v, "norm"), mirror_ids, det.per_frame(v, "colour")):
+        if len(dn) == 0 or len(mn) == 0:
             continue
-        lines = mirrored_epipolar_lines(np.asarray(dxy), camera, plane)  # (n_d, 3), undistorted px
-        q = camera.ideal_pixels(camera.normalize(np.asarray(mxy)))  # (n_m, 2)
+        lines = lines_of_normalised(dn, camera, plane)  # (n_d, 3), undistorted px
+        q = camera.ideal_pixels(mn)  # (n_m, 2)
         dist = np.abs(lines[:, None, 0] * q[None, :, 0] + lines[:, None, 1] * q[None, :, 1] + lines[:, None, 2])
-        i, j = np.nonzero((dist <= band_px) & (np.asarray(dcol)[:, None] == np.asarray(mcol)[None, :]))
+        i, j = np.nonzero((dist <= band_px) & (dcol[:, None] == mcol[None, :]))
         keys.append(np.asarray(did)[i] * n_mt + np.asarray(mid)[j])
         sq.append(dist[i, j] ** 2)
     if not keys:

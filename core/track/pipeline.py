@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from ..capture.markers import ColorClasses, ExtractionSettings
 from ..capture.rig import ViewLayout
+from ..capture.views import ClipDetections, FrameDets
 from ..capture.video import VideoSource
 from ..common.log import MessageLog
 from ..common.errors import DegenerateError, InputError
@@ -44,16 +43,6 @@ from .tracker import TrackSettings, track
 
 SELFCAL_FRAMES = 10
 FACE_DISTANCE_MM = 600.0   # nominal camera-to-face distance that fixes a self-calibrated take's scale
-
-
-@dataclass
-class FrameDets:
-    """One frame's detections per view (pixels, colour-class indices)."""
-
-    direct: np.ndarray
-    direct_color: np.ndarray
-    mirror: list = field(default_factory=list)
-    mirror_color: list = field(default_factory=list)
 
 
 def collect_detections(stream) -> tuple[list, list]:
@@ -92,17 +81,12 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                             rigid_source=rigid_source, log=log)
 
 
-def _median_depth(frames, camera: Camera, cals, ds) -> float:
-    """Median depth of the 3D candidates of ``frames`` under self-calibrated planes."""
-    from .candidates import frame_candidates
+def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
+    """Median depth of the 3D candidates of ``det`` under self-calibrated planes."""
+    from .candidates import clip_candidates
 
-    normals = [c.plane.normal for c in cals]
-    z = []
-    for fr in frames:
-        cand = frame_candidates(camera.normalize(fr.direct), fr.direct_color, [camera.normalize(m) for m in fr.mirror],
-                                fr.mirror_color, normals, ds, camera.focal_px)
-        z.append(cand.points[:, 2])
-    z = np.concatenate(z) if z else np.zeros(0)
+    normals = np.stack([c.plane.normal for c in cals])
+    z = clip_candidates(det, normals, ds, camera.focal_px).points[:, 2]
     z = z[np.isfinite(z) & (z > 0)]
     if z.size == 0:
         raise DegenerateError("no marker pairs between the direct view and the mirrors: cannot place the face")
@@ -122,22 +106,24 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
 
     if len(frames) < 2:
         raise InputError("tracking needs at least 2 frames")
+    det = ClipDetections.of(frames, camera)  # the one normalisation of the clip's pixels
+    first = det.head(SELFCAL_FRAMES)
     if mirrors is None:
-        if any(len(f.mirror[k]) < 6 for f in frames[:SELFCAL_FRAMES] for k in range(2)):
+        if any(np.any(first.counts(k + 1) < 6) for k in range(2)):
             raise DegenerateError("a mirror shows fewer than 6 markers in the first frames: are both mirrors "
                                   "visible? (give MIRRORS.json from `mirrorcap mirrors` otherwise)")
-        cals = [self_calibrate_mirror(frames[:SELFCAL_FRAMES], camera, k) for k in range(2)]
-        ds = link_self_calibrated(frames[:SELFCAL_FRAMES], camera, cals)
+        cals = [self_calibrate_mirror(first, camera, k) for k in range(2)]
+        ds = link_self_calibrated(first, camera, cals)
         # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
         # levels are in mm, so put the face at its nominal distance: the take is then
         # "relative" units that are close to millimetres (a known length makes them exact).
-        ds = ds * (face_distance_mm / _median_depth(frames[:SELFCAL_FRAMES], camera, cals, ds))
+        ds = ds * (face_distance_mm / _median_depth(first, camera, cals, ds))
         planes = [MirrorPlane(normal=c.plane.normal, d=float(d)) for c, d in zip(cals, ds)]
         mirror_source, units = "self-calibration", "relative"
     else:
         planes, mirror_source, units = list(mirrors), "file", "mm"
     t1 = time.perf_counter()
-    result = track(frames, camera, planes, settings, progress=progress, rigid=rigid)
+    result = track(det, camera, planes, settings, progress=progress, rigid=rigid)
     t_track = time.perf_counter() - t1
     points = result.points
     head = result.head_pose.copy()

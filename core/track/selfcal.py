@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..capture.views import ClipDetections
 from ..common.errors import DegenerateError
 from ..geometry.camera import Camera
 from ..geometry.mirror import (
@@ -37,6 +38,7 @@ from ..geometry.mirror import (
     normal_from_correspondences,
     orient_normal,
 )
+from .candidates import _same_frame_pairs
 
 
 @dataclass
@@ -51,24 +53,18 @@ class Candidates:
     dy_px: np.ndarray  # (C,) vertical offset in pixels
 
 
-def build_candidates(frames, camera: Camera, mirror: int) -> Candidates:
-    """All same-colour pairs per frame; ``frames`` are objects with ``direct``,
-    ``direct_color``, ``mirror[k]``, ``mirror_color[k]`` (e.g.
-    :class:`synthetic.simulate.FrameDetections`)."""
-    parts = []
-    d_off = m_off = 0
-    for f, fr in enumerate(frames):
-        dp, dc = np.asarray(fr.direct, float), np.asarray(fr.direct_color)
-        mp, mc = np.asarray(fr.mirror[mirror], float), np.asarray(fr.mirror_color[mirror])
-        i, j = np.nonzero(dc[:, None] == mc[None, :])
-        parts.append((dp[i], mp[j], i + d_off, j + m_off, np.full(i.size, f), mp[j, 1] - dp[i, 1]))
-        d_off += len(dp)
-        m_off += len(mp)
-    if not parts or sum(len(x[0]) for x in parts) == 0:
+def build_candidates(det: ClipDetections, mirror: int) -> Candidates:
+    """All same-colour (direct, mirror ``mirror``) pairs of each frame of ``det``
+    (:class:`..capture.views.ClipDetections`; its normalised coordinates, no undistortion
+    here). Blob indices are ``det``'s global ones."""
+    v = mirror + 1
+    i, j = _same_frame_pairs(det.frame[0], det.frame[v])
+    same = det.colour[0][i] == det.colour[v][j]
+    i, j = i[same], j[same]
+    if i.size == 0:
         raise DegenerateError(f"no same-colour candidates between the direct view and mirror {mirror}")
-    cat = [np.concatenate([x[k] for x in parts]) for k in range(6)]
-    return Candidates(p=camera.normalize(cat[0]), pm=camera.normalize(cat[1]), direct_blob=cat[2],
-                      mirror_blob=cat[3], frame=cat[4], dy_px=cat[5])
+    return Candidates(p=det.norm[0][i], pm=det.norm[v][j], direct_blob=i, mirror_blob=j, frame=det.frame[0][i],
+                      dy_px=det.xy[v][j, 1] - det.xy[0][i, 1])
 
 
 def _blob_min(values, groups_sorted_idx, starts):
@@ -119,19 +115,22 @@ class SelfCalibration:
     candidates: int
 
 
-def self_calibrate_mirror(frames, camera: Camera, mirror: int, *, threshold_px: float = 1.0,
+def self_calibrate_mirror(det: ClipDetections, camera: Camera, mirror: int, *, threshold_px: float = 1.0,
                           final_threshold_px: float = 0.5, confidence: float = 0.99, max_iterations: int = 60000,
                           max_dy_px: float | None = None, score_frames: int = 3, seed: int = 0,
                           batch: int = 32, rescored: int = 4) -> SelfCalibration:
-    """Estimate mirror ``mirror``'s plane from detections alone (module docstring).
+    """Estimate mirror ``mirror``'s plane from the detections ``det`` alone (module
+    docstring; a :class:`..capture.views.ClipDetections` of the first frames, or
+    per-frame detections, normalised here).
 
     ``max_dy_px`` bounds the vertical offset of the candidates sampled first
     (default 5 % of the image height); ``score_frames`` frames score hypotheses,
     all frames feed the refinement; of each ``batch`` of hypotheses the ``rescored``
     best on the first frame are scored on all of them."""
     f = camera.focal_px
-    cand_all = build_candidates(frames, camera, mirror)
-    scoring = cand_all if score_frames >= len(frames) else _subset(cand_all, cand_all.frame < score_frames)
+    det = ClipDetections.of(det, camera)
+    cand_all = build_candidates(det, mirror)
+    scoring = cand_all if score_frames >= det.n_frames else _subset(cand_all, cand_all.frame < score_frames)
     scorer = _Scorer(scoring, threshold_px / f)
     # preemptive scoring: every hypothesis is scored on the first frame alone, and only
     # the best ``rescored`` of each batch on all ``score_frames`` frames
@@ -170,7 +169,7 @@ def self_calibrate_mirror(frames, camera: Camera, mirror: int, *, threshold_px: 
                 w = min(inl[k] / max(pool.size, 1), 1.0)  # chance that a sampled candidate is a true pair
                 if w > 0:
                     needed = int(np.ceil(np.log(1 - confidence) / np.log(max(1 - w * w, 1e-12))))
-        if best_u is not None and best_inliers >= 0.3 * n_direct / max(len(frames[:score_frames]), 1):
+        if best_u is not None and best_inliers >= 0.3 * n_direct / max(min(det.n_frames, score_frames), 1):
             break  # the restricted pool found a plane explaining many blobs: no fallback needed
     if best_u is None:
         raise DegenerateError(f"mirror {mirror}: no mirror plane hypothesis could be formed")
@@ -234,12 +233,13 @@ def _one_to_one(c: Candidates, u, threshold: float) -> np.ndarray:
     return np.concatenate(chosen).astype(int)
 
 
-def link_self_calibrated(frames, camera: Camera, results) -> np.ndarray:
+def link_self_calibrated(det: ClipDetections, camera: Camera, results) -> np.ndarray:
     """The ``d`` of each mirror in the units of mirror 0, through direct blobs paired
     in both mirrors (their depths must agree). Returns ``ds``."""
     if len(results) < 2:
         return np.array([r.plane.d for r in results])
-    cands = [build_candidates(frames, camera, k) for k in range(len(results))]
+    det = ClipDetections.of(det, camera)
+    cands = [build_candidates(det, k) for k in range(len(results))]
     pairs = [_one_to_one(c, r.plane.normal, 0.5 / camera.focal_px) for c, r in zip(cands, results)]
     ds = np.array([r.plane.d for r in results], dtype=float)
     z = []

@@ -33,7 +33,8 @@ from ..common.errors import DegenerateError
 from ..geometry.camera import Camera
 from ..geometry.mirror import MirrorPlane, points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
-from .candidates import ClipCandidates, ClipDetections, clip_candidates
+from ..capture.views import ClipDetections
+from .candidates import ClipCandidates, clip_candidates
 from .late import add_late_markers
 from .motion import (
     ConstantVelocityKalman,
@@ -49,28 +50,27 @@ from .pairing import pair_tracks, track_2d
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
 
 
-def _paired_tracks(frames, camera, normals, ds, band_px: float, min_frames: int):
-    """2D tracks of the direct view and of each mirror over ``frames``, and each direct
+def _paired_tracks(det: ClipDetections, camera, normals, ds, band_px: float, min_frames: int):
+    """2D tracks of the direct view and of each mirror over the frames of ``det``, and each direct
     track's partner track per mirror (``core.track.pairing``; -1: none). Returns
     ``(direct ids per frame, number of direct tracks, partner (K, n), mirror ids per
     frame per mirror, ambiguous (K, n): tracks with rival partners in that mirror)``."""
-    dids, n_dt = track_2d([f.direct for f in frames], [f.direct_color for f in frames])
+    dids, n_dt = track_2d(det.per_frame(0), det.per_frame(0, "colour"))
     K = len(normals)
     partner = np.full((K, n_dt), -1)
     ambiguous = np.zeros((K, n_dt), bool)
     mids_all = []
     for k in range(K):
-        mids, _ = track_2d([f.mirror[k] for f in frames], [f.mirror_color[k] for f in frames])
-        pairs = pair_tracks([f.direct for f in frames], dids, [f.mirror[k] for f in frames], mids,
-                            [f.direct_color for f in frames], [f.mirror_color[k] for f in frames], camera,
-                            MirrorPlane(normal=normals[k], d=float(ds[k])), band_px=band_px, min_frames=min_frames)
+        mids, _ = track_2d(det.per_frame(k + 1), det.per_frame(k + 1, "colour"))
+        pairs = pair_tracks(det, dids, k, mids, camera, MirrorPlane(normal=normals[k], d=float(ds[k])),
+                            band_px=band_px, min_frames=min_frames)
         partner[k, pairs.direct_track] = pairs.mirror_track
         ambiguous[k, pairs.ambiguous] = True
         mids_all.append(mids)
     return dids, n_dt, partner, mids_all, ambiguous
 
 
-def _undecided(frames, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
+def _undecided(det: ClipDetections, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
     """Direct-view tracks of the first frames, seen in at least ``min_frames`` of them,
     that no mirror track was paired with: markers whose 3D position cannot be decided
     (procedure step 2). Per track: where it was first seen (frame, x, y px), its colour
@@ -80,26 +80,26 @@ def _undecided(frames, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
     first = np.full(n_dt, -1)
     xy = np.zeros((n_dt, 2))
     colour = np.zeros(n_dt, int)
-    for f in range(len(frames) - 1, -1, -1):  # backwards: the earliest sighting is written last
+    for f in range(det.n_frames - 1, -1, -1):  # backwards: the earliest sighting is written last
         ids = np.asarray(dids[f], int)
         if ids.size == 0:
             continue
         seen[ids] += 1
         first[ids] = f
-        xy[ids] = np.asarray(frames[f].direct, float)
-        colour[ids] = np.asarray(frames[f].direct_color)
+        xy[ids] = det.xy[0][det.frame_view(f, 0)]
+        colour[ids] = det.colour[0][det.frame_view(f, 0)]
     tracks = np.flatnonzero((seen >= min_frames) & np.all(partner < 0, axis=0))
     return {"track": tracks, "frame": first[tracks], "xy": xy[tracks], "colour": colour[tracks],
             "frames_seen": seen[tracks], "ambiguous_in": ambiguous[:, tracks].T}
 
 
-def _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all, tracks):
+def _track_positions(det: ClipDetections, normals, ds, dids, n_dt, partner, mids_all, tracks):
     """3D position of chosen direct tracks in every frame where the track and one of
     its partner mirror tracks both have a blob (fused over mirrors): ``pos (F, M, 3)``
     (NaN elsewhere, each frame's own camera coordinates), the direct blob per frame
     ``(F, M)`` (-1: absent) and each track's colour ``(M,)``. Vectorised per frame
     through lookup arrays."""
-    F, M, K = len(frames), len(tracks), len(normals)
+    F, M, K = det.n_frames, len(tracks), len(normals)
     col_of = np.full(n_dt, -1)
     col_of[tracks] = np.arange(M)
     n_mt = [1 + max((int(m.max()) for m in mids_all[k] if len(m)), default=0) for k in range(K)]
@@ -114,7 +114,8 @@ def _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all,
         marker = here[sel]
         blob[f, marker] = sel
         unset = colour[marker] < 0
-        colour[marker[unset]] = np.asarray(frames[f].direct_color)[sel[unset]]
+        direct = det.frame_view(f, 0)
+        colour[marker[unset]] = det.colour[0][direct][sel[unset]]
         vis = np.zeros((K, sel.size), bool)
         pm = np.zeros((K, sel.size, 2))
         for k in range(K):
@@ -124,15 +125,15 @@ def _track_positions(frames, camera, normals, ds, dids, n_dt, partner, mids_all,
             j = np.where(mate >= 0, blob_of[np.maximum(mate, 0)], -1)
             vis[k] = j >= 0
             if vis[k].any():
-                pm[k, vis[k]] = camera.normalize(frames[f].mirror[k][j[vis[k]]])
+                pm[k, vis[k]] = det.norm[k + 1][det.frame_view(f, k + 1)][j[vis[k]]]
         ok = vis.any(axis=0)
         if ok.any():
-            pos[f, marker[ok]] = points_from_planes(camera.normalize(frames[f].direct[sel[ok]]), pm[:, ok],
+            pos[f, marker[ok]] = points_from_planes(det.norm[0][direct][sel[ok]], pm[:, ok],
                                                     normals, ds, visible=vis[:, ok])
     return pos, blob, colour
 
 
-def _initial_markers(frames, camera, normals, ds, settings):
+def _initial_markers(det: ClipDetections, camera, normals, ds, settings):
     """Step 2: markers are direct-view tracks paired with a mirror track over the first
     ``init_frames`` frames. Each marker's neutral position is its 3D position at the
     first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
@@ -140,8 +141,8 @@ def _initial_markers(frames, camera, normals, ds, settings):
     Returns each marker's frame-0 direct blob (-1 if absent), the neutral structure
     (N, 3), the markers' colour classes (N,) and the frame each is measured from (N,),
     here 0; and the undecided direct-view tracks (:func:`_undecided`)."""
-    W = min(settings.init_frames, len(frames))
-    init = frames[:W]
+    W = min(settings.init_frames, det.n_frames)
+    init = det.head(W)
     dids, n_dt, partner, mids_all, ambiguous = _paired_tracks(init, camera, normals, ds, settings.band_px,
                                                                min(5, W))
     undecided = _undecided(init, dids, n_dt, partner, ambiguous, min(5, W))
@@ -150,7 +151,7 @@ def _initial_markers(frames, camera, normals, ds, settings):
     if tracks.size < 10:
         raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
                               "in the first frames; are both mirrors visible and calibrated?")
-    pos, blob, colour = _track_positions(init, camera, normals, ds, dids, n_dt, partner, mids_all, tracks)
+    pos, blob, colour = _track_positions(init, normals, ds, dids, n_dt, partner, mids_all, tracks)
     neutral = pos[0].copy()
     known = np.all(np.isfinite(neutral), axis=1)
     for f in range(1, W):
@@ -178,7 +179,9 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     relative to the head -- forehead, nose bridge, temples on a real face -- carry the
     pose in a second pass.
 
-    The detections are flattened and undistorted once, and the 3D candidates of every
+    ``frames`` may be a :class:`..capture.views.ClipDetections` (as ``mirrorcap track``
+    passes them, normalised once on ingest); per-frame detections are flattened and
+    undistorted here, once. The 3D candidates of every
     frame are found in one vectorised pass (``core.track.candidates.clip_candidates``) before
     the frame loop."""
     s = settings or TrackSettings()
@@ -194,10 +197,10 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         clock.append(time.perf_counter())
         timings[name] = clock[-1] - clock[-2]
 
-    markers, undecided = _initial_markers(frames, camera, normals, ds, s)
+    det = ClipDetections.of(frames, camera)
+    markers, undecided = _initial_markers(det, camera, normals, ds, s)
     n_initial = len(markers[1])
     lap("initial_markers")
-    det = ClipDetections.from_frames(frames, camera)
     z_mid = float(np.median(markers[1][:, 2]))
     cands = clip_candidates(det, normals, ds, camera.focal_px, s.band_px,
                             (z_mid - s.depth_margin_mm, z_mid + s.depth_margin_mm))

@@ -1,0 +1,94 @@
+"""A clip's detections as the later stages read them, normalised once on ingest.
+
+:class:`FrameDets` is one frame's detections per view in pixels (what the detector, the
+add-on's clip tracks or the simulator give). :class:`ClipDetections` holds a whole clip
+as flat arrays per view -- pixels, colour classes, frames and the *normalised camera*
+coordinates (Lin 2003, ch. 3: undistorted, ``f = 1``) from one
+:meth:`core.geometry.camera.Camera.normalize` call per view. Self-calibration, pairing,
+the 3D candidates and the tracker all read ``norm`` from it; none of them undistorts
+pixels again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class FrameDets:
+    """One frame's detections per view (pixels, colour-class indices)."""
+
+    direct: np.ndarray
+    direct_color: np.ndarray
+    mirror: list = field(default_factory=list)
+    mirror_color: list = field(default_factory=list)
+
+
+@dataclass
+class ClipDetections:
+    """The detections of a whole clip as flat arrays, one entry per view (0: direct,
+    1..K: mirrors), each sorted by frame: pixels ``xy`` ``(D, 2)``, undistorted
+    normalised coordinates ``norm`` ``(D, 2)`` (one ``Camera.normalize`` call per view
+    for the clip), colour classes ``colour`` ``(D,)``, ``frame`` ``(D,)`` and the offsets
+    ``start`` ``(F + 1,)``: frame ``f`` of view ``v`` is ``start[v][f]:start[v][f + 1]``.
+    A detection's index in its view is its *global* blob index."""
+
+    n_frames: int
+    xy: list
+    norm: list
+    colour: list
+    frame: list
+    start: list
+
+    @classmethod
+    def from_frames(cls, frames, camera) -> "ClipDetections":
+        """From per-frame objects with ``direct``, ``direct_color``, ``mirror[k]`` and
+        ``mirror_color[k]`` (:class:`FrameDets`, :class:`synthetic.simulate.FrameDetections`)."""
+        F = len(frames)
+        K = len(frames[0].mirror) if F else 0
+        xy, norm, colour, frame, start = [], [], [], [], []
+        for v in range(K + 1):
+            pos = [np.asarray(f.direct if v == 0 else f.mirror[v - 1], float).reshape(-1, 2) for f in frames]
+            col = [np.asarray(f.direct_color if v == 0 else f.mirror_color[v - 1], int).reshape(-1) for f in frames]
+            counts = np.array([len(p) for p in pos], int)
+            xy.append(np.concatenate(pos) if F else np.zeros((0, 2)))
+            norm.append(camera.normalize(xy[-1]) if len(xy[-1]) else np.zeros((0, 2)))
+            colour.append(np.concatenate(col) if F else np.zeros(0, int))
+            frame.append(np.repeat(np.arange(F), counts))
+            start.append(np.r_[0, np.cumsum(counts)])
+        return cls(F, xy, norm, colour, frame, start)
+
+    @classmethod
+    def of(cls, frames, camera) -> "ClipDetections":
+        """``frames`` as a :class:`ClipDetections`: itself when it is one already
+        (nothing normalised again), else :meth:`from_frames`."""
+        return frames if isinstance(frames, cls) else cls.from_frames(frames, camera)
+
+    @property
+    def n_mirrors(self) -> int:
+        return len(self.xy) - 1
+
+    def __len__(self) -> int:
+        return self.n_frames
+
+    def head(self, n: int) -> "ClipDetections":
+        """The first ``n`` frames (views into the same arrays; blob indices unchanged)."""
+        n = max(0, min(int(n), self.n_frames))
+        ends = [int(s[n]) for s in self.start]
+        return ClipDetections(n, [a[:e] for a, e in zip(self.xy, ends)], [a[:e] for a, e in zip(self.norm, ends)],
+                              [a[:e] for a, e in zip(self.colour, ends)], [a[:e] for a, e in zip(self.frame, ends)],
+                              [s[:n + 1] for s in self.start])
+
+    def frame_view(self, f: int, v: int) -> slice:
+        return slice(int(self.start[v][f]), int(self.start[v][f + 1]))
+
+    def per_frame(self, v: int, what: str = "xy") -> list:
+        """View ``v``'s ``what`` (``"xy"``, ``"norm"`` or ``"colour"``) as a list over
+        frames (array views, no copies)."""
+        return np.split(getattr(self, what)[v], self.start[v][1:-1])
+
+    def counts(self, v: int) -> np.ndarray:
+        """Detections per frame in view ``v`` ``(F,)``."""
+        return np.diff(self.start[v])
