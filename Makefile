@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cat requirements.txt requirements-dev.txt pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench sample head rig-clip extension contact-sheet clean venv
+.PHONY: demo test bench sample head rig-clip stress-clips extension contact-sheet clean venv
 
 venv: $(STAMP)
 
@@ -46,3 +46,12 @@ head: $(STAMP)
 
 contact-sheet: $(STAMP)
 	$(PY) sample_scenes/make_contact_sheet.py
+
+# The stress clips of issue #18 (Cycles, cached frames): a dense 720x480 rig at the paper's resolution
+# (290 markers of 2.2 mm, mirror planes at 40 deg to the optical axis) and a 1280x720 clip with large head
+# motion (+-15 deg yaw, +-10 deg pitch) and expressions 2.5x as fast. About 20 minutes on 2 cores.
+stress-clips: $(STAMP)
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
+		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/motion --head-deg 10 15 4 --tempo 2.5 \
+		--frames 300 --seed 12 --no-scan

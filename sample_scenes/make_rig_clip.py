@@ -22,10 +22,18 @@ What it makes, in ``sample_scenes/rig_clip/``:
 
 The subject is the generic head with a smooth change of proportions (wider, a longer nose, a
 lower chin), so fitting the generic head to the scan has work to do. Frames are rendered to
-PNG in ``sample_scenes/.cache/rig_clip_frames`` (an interrupted run resumes) and encoded to
+PNG in ``sample_scenes/.cache/<out folder name>_frames`` (an interrupted run resumes) and encoded to
 H.264 by Blender's FFmpeg; the outputs are replaced only once everything is written.
 
-    python sample_scenes/make_rig_clip.py [--frames 120] [--samples 16] [--preview FRAME]
+    python sample_scenes/make_rig_clip.py [--frames 120] [--samples 8] [--preview FRAME]
+
+Every property of the rig is an option, so other rigs make stress material
+(``sample_scenes/stress/``, ``make stress-clips``): ``--out DIR``, ``--size W H``,
+``--focal PX``, ``--markers N``, ``--marker-mm D`` (dot diameter), ``--mirror-deg L`` (the
+mirrors' normals at +-L degrees from the optical axis, so the mirror planes sit at 90 - L
+degrees to it), ``--distance MM`` (camera to the head's origin), ``--head-deg RX RY RZ`` (largest
+pitch, yaw and roll of the head motion), ``--tempo T`` (expressions T times as fast and as
+frequent), ``--seed``.
 """
 
 from __future__ import annotations
@@ -53,17 +61,28 @@ from mirrorcap.synthetic.headsim import head_motion, performance, place_markers 
 from mirrorcap.synthetic.simulate import mirror_plane_from_angles  # noqa: E402
 
 OUT = HERE / "rig_clip"
-CACHE = HERE / ".cache" / "rig_clip_frames"
-IMAGE_SIZE = (1280, 720)
-FOCAL_PX = 1400.0
 FPS = 30
-HEAD_DISTANCE_MM = 650.0          # head-frame origin (between the ears) from the camera
-MIRROR_LONGITUDE_DEG = 65.0       # mirrors tangent to a sphere around the face (fig. 6.4)
-MIRROR_RADIUS_MM = 120.0
-MIRROR_CENTRE = (0.0, 20.0, 560.0)
-MARKER_RADIUS_MM = 1.25           # 2.5 mm dots
+MIRROR_RADIUS_MM = 120.0          # mirrors tangent to a sphere around the face (fig. 6.4)
+MIRROR_CENTRE_XY = (0.0, 20.0)    # the sphere's centre; its depth is the head's distance - 90 mm
 MARKER_LIFT_MM = 0.5              # how far a dot's centre sits above the skin
-N_MARKERS = 150
+
+
+@dataclasses.dataclass(frozen=True)
+class ClipSpec:
+    """The rig of a rendered clip; the defaults make the embedded sample."""
+
+    image_size: tuple = (1280, 720)
+    focal_px: float = 1400.0
+    head_distance_mm: float = 650.0      # head-frame origin (between the ears) from the camera
+    mirror_longitude_deg: float = 65.0   # each mirror's normal from the optical axis
+    marker_radius_mm: float = 1.25       # 2.5 mm dots
+    n_markers: int = 150
+    head_deg: tuple = (6.0, 6.0, 6.0)    # largest pitch, yaw, roll of the head motion
+    tempo: float = 1.0                   # expression speed and frequency
+
+    @property
+    def mirror_centre(self):
+        return (*MIRROR_CENTRE_XY, self.head_distance_mm - 90.0)
 # sRGB colours of the four blacklight paints (core.markers' default classes)
 PAINTS = {"pink": (255, 110, 200), "blue-green": (70, 230, 200), "dark-blue": (60, 80, 255),
           "purple": (175, 70, 255)}
@@ -81,9 +100,10 @@ def subject_from_generic(head: HeadModel) -> np.ndarray:
     return V
 
 
-def rig_planes():
+def rig_planes(spec: ClipSpec):
     """Mirror 0 (imaged left) then mirror 1, as ``(normal, d)``."""
-    return [mirror_plane_from_angles(s * MIRROR_LONGITUDE_DEG, 0.0, MIRROR_CENTRE, MIRROR_RADIUS_MM) for s in (-1, 1)]
+    return [mirror_plane_from_angles(s * spec.mirror_longitude_deg, 0.0, spec.mirror_centre, MIRROR_RADIUS_MM)
+            for s in (-1, 1)]
 
 
 def make_scan(head: HeadModel, subject: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -117,14 +137,14 @@ def ply_bytes(V, T) -> bytes:
     return header + np.asarray(V, "<f4").tobytes() + faces.tobytes()
 
 
-def build_scene(bpy, head: HeadModel, subject, marker_colors):
+def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     from mirrorcap.addon.common.frames import core_to_blender
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.render.resolution_x, scene.render.resolution_y = IMAGE_SIZE
+    scene.render.resolution_x, scene.render.resolution_y = spec.image_size
     scene.render.resolution_percentage = 100
     scene.render.fps = FPS
     scene.view_settings.view_transform = "Standard"
@@ -148,7 +168,7 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors):
     cam_data = bpy.data.cameras.new("rig_camera")
     cam_data.sensor_fit = "HORIZONTAL"
     cam_data.sensor_width = 36.0
-    cam_data.lens = FOCAL_PX / IMAGE_SIZE[0] * 36.0
+    cam_data.lens = spec.focal_px / spec.image_size[0] * 36.0
     cam_data.clip_start = 0.01
     cam = bpy.data.objects.new("rig_camera", cam_data)
     cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
@@ -194,7 +214,7 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors):
     scene.collection.objects.link(skin)
 
     # markers: one mesh of 150 icospheres, one material per paint
-    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=MARKER_RADIUS_MM / 1000.0)
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=spec.marker_radius_mm / 1000.0)
     proto = bpy.context.active_object
     unit = np.empty(len(proto.data.vertices) * 3, np.float32)
     proto.data.vertices.foreach_get("co", unit)
@@ -220,7 +240,7 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors):
 
     # the mirrors: finite panels beside the cheeks
     edges = []
-    for k, (n, d) in enumerate(rig_planes()):
+    for k, (n, d) in enumerate(rig_planes(spec)):
         n = np.asarray(n)
         foot = n * d                                      # closest point of the plane to the origin
         tangent = np.cross(n, [0.0, 1.0, 0.0])
@@ -228,7 +248,7 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors):
         if tangent[2] < 0:
             tangent = -tangent                            # along the mirror, away from the camera
         # the panel runs from ~170 mm in front of the tangent point to ~40 mm behind it
-        touch = np.asarray(MIRROR_CENTRE) - n * MIRROR_RADIUS_MM
+        touch = np.asarray(spec.mirror_centre) - n * MIRROR_RADIUS_MM
         along = (touch - foot) @ tangent
         s0, s1 = along - 190.0, along + 45.0
         up = np.array([0.0, 1.0, 0.0])
@@ -259,7 +279,24 @@ def main(argv=None) -> int:
     ap.add_argument("--samples", type=int, default=8)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--preview", type=int, help="render only this frame to sample_scenes/.cache/preview.png")
+    ap.add_argument("--out", type=Path, default=OUT, help="folder to write (default sample_scenes/rig_clip)")
+    ap.add_argument("--size", type=int, nargs=2, metavar=("W", "H"), default=ClipSpec.image_size)
+    ap.add_argument("--focal", type=float, default=ClipSpec.focal_px, help="focal length in pixels")
+    ap.add_argument("--markers", type=int, default=ClipSpec.n_markers)
+    ap.add_argument("--marker-mm", type=float, default=2 * ClipSpec.marker_radius_mm, help="dot diameter")
+    ap.add_argument("--mirror-deg", type=float, default=ClipSpec.mirror_longitude_deg,
+                    help="each mirror's normal from the optical axis (the plane is at 90 - this)")
+    ap.add_argument("--distance", type=float, default=ClipSpec.head_distance_mm, help="camera to head, mm")
+    ap.add_argument("--head-deg", type=float, nargs=3, metavar=("RX", "RY", "RZ"), default=ClipSpec.head_deg,
+                    help="largest pitch, yaw, roll of the head motion")
+    ap.add_argument("--tempo", type=float, default=ClipSpec.tempo, help="expressions this many times as fast")
+    ap.add_argument("--no-scan", action="store_true", help="write no scan.ply / scan_landmarks.json")
     args = ap.parse_args(argv)
+    spec = ClipSpec(image_size=tuple(args.size), focal_px=args.focal, head_distance_mm=args.distance,
+                    mirror_longitude_deg=args.mirror_deg, marker_radius_mm=args.marker_mm / 2,
+                    n_markers=args.markers, head_deg=tuple(args.head_deg), tempo=args.tempo)
+    out = args.out.resolve()
+    cache = HERE / ".cache" / f"{out.name}_frames"
 
     import bpy
 
@@ -270,16 +307,16 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     subject = subject_from_generic(head)
     sub_head = dataclasses.replace(head, vertices=subject, name="subject")
-    verts, labels = place_markers(sub_head, N_MARKERS, seed=args.seed)
-    disp, _ = performance(head, keys, args.frames, FPS, seed=args.seed)
-    R, t = head_motion(args.frames, FPS, max_deg=6.0, seed=args.seed)
-    t = t + np.array([0.0, 0.0, HEAD_DISTANCE_MM])
+    verts, labels = place_markers(sub_head, spec.n_markers, seed=args.seed)
+    disp, _ = performance(head, keys, args.frames, FPS, seed=args.seed, tempo=spec.tempo)
+    R, t = head_motion(args.frames, FPS, max_deg=spec.head_deg, seed=args.seed)
+    t = t + np.array([0.0, 0.0, spec.head_distance_mm])
     marker_colors = np.arange(len(verts)) % len(PAINTS)
     rng.shuffle(marker_colors)
 
-    scene, skin, markers, unit, edges = build_scene(bpy, head, subject, marker_colors)
+    scene, skin, markers, unit, edges = build_scene(bpy, head, subject, marker_colors, spec)
     scene.cycles.samples = args.samples
-    CACHE.mkdir(parents=True, exist_ok=True)
+    cache.mkdir(parents=True, exist_ok=True)
     frames = [args.preview] if args.preview is not None else range(args.frames)
     points = np.empty((args.frames, len(verts), 3))
     t0 = time.perf_counter()
@@ -291,7 +328,7 @@ def main(argv=None) -> int:
         points[f] = centre_q @ R[f].T + t[f]
         if f not in frames:
             continue
-        png = CACHE / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"
+        png = cache / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"
         if png.is_file() and args.preview is None:
             continue
         skin.data.vertices.foreach_set("co", core_to_blender(cam_v).astype(np.float32).ravel())
@@ -308,29 +345,29 @@ def main(argv=None) -> int:
         return 0
 
     # encode the PNGs to H.264 with Blender's FFmpeg through the sequencer
-    tmp_dir = OUT.with_name(OUT.name + ".tmp")
+    tmp_dir = out.with_name(out.name + ".tmp")
     shutil.rmtree(tmp_dir, ignore_errors=True)
     tmp_dir.mkdir(parents=True)
     enc = bpy.data.scenes.new("encode")
-    enc.render.resolution_x, enc.render.resolution_y = IMAGE_SIZE
+    enc.render.resolution_x, enc.render.resolution_y = spec.image_size
     enc.render.resolution_percentage = 100
     enc.render.fps = FPS
     enc.frame_start, enc.frame_end = 1, args.frames
     enc.view_settings.view_transform = "Standard"
     seq = enc.sequence_editor_create()
     strips = seq.strips if hasattr(seq, "strips") else seq.sequences
-    strip = strips.new_image("frames", str(CACHE / "frame_0000.png"), channel=1, frame_start=1)
+    strip = strips.new_image("frames", str(cache / "frame_0000.png"), channel=1, frame_start=1)
     for f in range(1, args.frames):
         strip.elements.append(f"frame_{f:04d}.png")
     h264_output(enc.render, tmp_dir / "clip.mp4", "PERC_LOSSLESS", gop_size=FPS)
     with bpy.context.temp_override(scene=enc):
         bpy.ops.render.render(animation=True, scene=enc.name)
-    camera = Camera.ideal(FOCAL_PX, IMAGE_SIZE)
-    planes = rig_planes()
+    camera = Camera.ideal(spec.focal_px, spec.image_size)
+    planes = rig_planes(spec)
     # RIG.json: the views split where the mirror panels' inner edges are imaged
     b0 = float(np.floor(camera.project(edges[0])[:, 0].max()))
     b1 = float(np.ceil(camera.project(edges[1])[:, 0].min()))
-    w, h = IMAGE_SIZE
+    w, h = spec.image_size
     rig = {"views": {"mirror0": [0, 0, b0, h], "direct": [b0, 0, b1, h], "mirror1": [b1, 0, w, h]}}
     scan_V, scan_T, scan_lms, scan_R, scan_t = make_scan(head, subject, rng)
     buf = __import__("io").BytesIO()
@@ -341,22 +378,25 @@ def main(argv=None) -> int:
                         subject_vertices=subject.astype(np.float32), performance_seed=np.int64(args.seed),
                         scan_rotation=scan_R, scan_translation=scan_t)
     info = {"frames": args.frames, "fps": FPS, "markers": len(verts), "samples_per_pixel": args.samples,
-            "head_distance_mm": HEAD_DISTANCE_MM,
-            "mirror_longitude_deg": MIRROR_LONGITUDE_DEG, "marker_diameter_mm": 2 * MARKER_RADIUS_MM,
-            "paints": PAINTS, "made_by": "sample_scenes/make_rig_clip.py"}
-    OUT.mkdir(parents=True, exist_ok=True)
-    write_files_atomically({
-        OUT / "clip.mp4": (tmp_dir / "clip.mp4").read_bytes(),
-        OUT / "camera.json": json.dumps(camera.to_dict(), indent=2) + "\n",
-        OUT / "truth.npz": buf.getvalue(),
-        OUT / "scan.ply": ply_bytes(scan_V, scan_T),
-        OUT / "scan_landmarks.json": json.dumps(scan_lms, indent=2) + "\n",
-        OUT / "clip.json": json.dumps(info, indent=2) + "\n",
-        OUT / "rig.json": json.dumps(rig, indent=2) + "\n",
-    })
+            "image_size": list(spec.image_size), "focal_px": spec.focal_px,
+            "head_distance_mm": spec.head_distance_mm, "mirror_longitude_deg": spec.mirror_longitude_deg,
+            "marker_diameter_mm": 2 * spec.marker_radius_mm, "head_deg": list(spec.head_deg), "tempo": spec.tempo,
+            "seed": args.seed, "paints": PAINTS, "made_by": "sample_scenes/make_rig_clip.py"}
+    out.mkdir(parents=True, exist_ok=True)
+    files = {
+        out / "clip.mp4": (tmp_dir / "clip.mp4").read_bytes(),
+        out / "camera.json": json.dumps(camera.to_dict(), indent=2) + "\n",
+        out / "truth.npz": buf.getvalue(),
+        out / "clip.json": json.dumps(info, indent=2) + "\n",
+        out / "rig.json": json.dumps(rig, indent=2) + "\n",
+    }
+    if not args.no_scan:
+        files[out / "scan.ply"] = ply_bytes(scan_V, scan_T)
+        files[out / "scan_landmarks.json"] = json.dumps(scan_lms, indent=2) + "\n"
+    write_files_atomically(files)
     shutil.rmtree(tmp_dir, ignore_errors=True)
-    size = (OUT / "clip.mp4").stat().st_size
-    print(f"{OUT / 'clip.mp4'}: {size / 1e6:.2f} MB, {args.frames} frames; truth, scan and camera beside it")
+    size = (out / "clip.mp4").stat().st_size
+    print(f"{out / 'clip.mp4'}: {size / 1e6:.2f} MB, {args.frames} frames; truth, scan and camera beside it")
     return 0
 
 

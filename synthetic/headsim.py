@@ -32,17 +32,19 @@ SINGLE_UNITS = ("cheekPuff", "jawForward", "jawLeft", "jawRight", "mouthClose", 
                 "mouthShrugUpper", "eyeSquintLeft", "eyeSquintRight", "eyeWideLeft", "eyeWideRight")
 
 
-def channel_weights(n_frames: int, fps: float, n_channels: int, seed: int = 0, events_per_s: float = 0.6):
-    """Smooth weights ``(F, C)`` in [0, 1]: random raised-cosine events (0.4-1.2 s long),
-    none before 0.1 s, so the first frame is the neutral face."""
+def channel_weights(n_frames: int, fps: float, n_channels: int, seed: int = 0, events_per_s: float = 0.6,
+                    tempo: float = 1.0):
+    """Smooth weights ``(F, C)`` in [0, 1]: random raised-cosine events (0.4-1.2 s long,
+    divided by ``tempo``; ``tempo`` times as many), none before 0.1 s, so the first frame is
+    the neutral face."""
     rng = np.random.default_rng(seed)
     t = np.arange(n_frames) / fps
     W = np.zeros((n_frames, n_channels))
     T = n_frames / fps
     for c in range(n_channels):
-        n_ev = rng.poisson(events_per_s * T / max(n_channels / 4, 1)) + 1
+        n_ev = rng.poisson(tempo * events_per_s * T / max(n_channels / 4, 1)) + 1
         starts = rng.uniform(0.1, max(T - 0.2, 0.2), n_ev)
-        lengths = rng.uniform(0.4, 1.2, n_ev)
+        lengths = rng.uniform(0.4, 1.2, n_ev) / tempo
         amps = rng.uniform(0.3, 1.0, n_ev)
         s = (t[:, None] - starts) / lengths
         bump = np.where((s >= 0) & (s <= 1), 0.5 - 0.5 * np.cos(2 * np.pi * s), 0.0) * amps
@@ -51,8 +53,9 @@ def channel_weights(n_frames: int, fps: float, n_channels: int, seed: int = 0, e
 
 
 def performance(head: HeadModel, shape_keys: dict, n_frames: int, fps: float = 30.0, seed: int = 0,
-                channels: dict | None = None, singles: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex displacements ``(F, V, 3)`` and channel weights ``(F, C)``."""
+                channels: dict | None = None, singles: tuple = (), tempo: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex displacements ``(F, V, 3)`` and channel weights ``(F, C)`` (``tempo``: see
+    :func:`channel_weights`)."""
     channels = dict(EXPRESSIONS if channels is None else channels)
     for u in singles:
         channels[u] = {u: 1.0}
@@ -60,7 +63,7 @@ def performance(head: HeadModel, shape_keys: dict, n_frames: int, fps: float = 3
     if missing:
         raise InputError("the head lacks the shape keys " + ", ".join(missing))
     basis = np.stack([sum(w * shape_keys[u] for u, w in mix.items()) for mix in channels.values()])  # (C, V, 3)
-    W = channel_weights(n_frames, fps, len(channels), seed)
+    W = channel_weights(n_frames, fps, len(channels), seed, tempo=tempo)
     return np.einsum("fc,cvd->fvd", W, basis), W
 
 
@@ -94,13 +97,16 @@ def place_markers(head: HeadModel, n_markers: int, seed: int = 0) -> tuple[np.nd
     return np.asarray(verts, np.int64), labels
 
 
-def head_motion(n_frames: int, fps: float, max_deg: float = 10.0, seed: int = 0):
-    """A smooth rigid head motion: ``R (F, 3, 3)``, ``t (F, 3)`` mm, starting at identity."""
+def head_motion(n_frames: int, fps: float, max_deg=10.0, seed: int = 0):
+    """A smooth rigid head motion: ``R (F, 3, 3)``, ``t (F, 3)`` mm, starting at identity.
+    ``max_deg``: the largest rotation about each axis, one number or ``(rx, ry, rz)`` --
+    pitch, yaw and roll in the camera frame (eq. 5.4)."""
     rng = np.random.default_rng(seed)
     t = np.arange(n_frames) / fps
     freq = rng.uniform(0.1, 0.4, (3, 1))
     phase = rng.uniform(0, 2 * np.pi, (3, 1))
-    ang = np.deg2rad(max_deg) * (np.sin(2 * np.pi * freq * t + phase) - np.sin(phase)).T / 2
+    amplitude = np.deg2rad(np.broadcast_to(np.asarray(max_deg, float), (3,)))
+    ang = amplitude * (np.sin(2 * np.pi * freq * t + phase) - np.sin(phase)).T / 2
     R = rotation_zyx(ang)
     trans = 5.0 * (np.sin(2 * np.pi * freq * t + phase) - np.sin(phase)).T
     return R, trans

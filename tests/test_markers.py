@@ -183,3 +183,41 @@ def test_clip_frames_move_and_keep_truth(rig):
     assert a.shape == (720, 1280, 3) and a.dtype == np.uint8
     moved = np.linalg.norm(ta.centres - tb.centres, axis=-1)[ta.visible & tb.visible]
     assert moved.max() > 0.5  # the head turns between frames
+
+
+def _ellipse_blob(shape, centre, sigmas, angle_deg, rgb):
+    """A soft elliptical blob (Gaussian profile, peak ``rgb``), BGR float image."""
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(float)
+    a = np.radians(angle_deg)
+    u = (xx - centre[0]) * np.cos(a) + (yy - centre[1]) * np.sin(a)
+    v = -(xx - centre[0]) * np.sin(a) + (yy - centre[1]) * np.cos(a)
+    prof = np.exp(-0.5 * ((u / sigmas[0]) ** 2 + (v / sigmas[1]) ** 2))
+    return prof[..., None] * np.asarray(rgb, float)[::-1]
+
+
+def test_blob_test_drops_teeth_keeps_foreshortened_markers_and_splits_touching_ones():
+    """Teeth under UV: pale, elongated streaks -> dropped. A marker at the silhouette,
+    foreshortened 3:1 but saturated -> kept where it is. Two touching markers of different
+    colours, one pale elongated component -> split into both, each in its class."""
+    names = mk.ColorClasses.default().names
+    img = np.zeros((120, 200, 3))
+    teeth = [((40, 30), (7.0, 1.6), 5), ((40, 90), (9.0, 2.0), -10)]       # pale blue-white
+    for c, sig, ang in teeth:
+        img += _ellipse_blob(img.shape[:2], c, sig, ang, (200, 210, 255))
+    img += _ellipse_blob(img.shape[:2], (100.3, 40.6), (3.3, 1.1), 30, mk.DEFAULT_CLASSES["pink"][0])
+    a, b = (140.2, 80.4), (145.6, 81.1)  # 5.4 px apart: one component at this threshold
+    img += _ellipse_blob(img.shape[:2], a, (1.6, 1.6), 0, mk.DEFAULT_CLASSES["blue-green"][0])
+    img += _ellipse_blob(img.shape[:2], b, (1.6, 1.6), 0, mk.DEFAULT_CLASSES["pink"][0])
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    found = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(threshold=30))
+    off = mk.extract_markers(img, mk.ColorClasses.default(),
+                             mk.ExtractionSettings(threshold=30, pale_saturation=0.0))  # the test turned off
+    assert len(off) == 4  # two teeth, the marker, the touching pair as one blob
+    assert len(found) == 3
+    xy = np.c_[found.x, found.y]
+    for centre, name in (((100.3, 40.6), "pink"), (a, "blue-green"), (b, "pink")):
+        i = int(np.argmin(np.linalg.norm(xy - centre, axis=1)))
+        assert names[found.color[i]] == name
+        assert np.linalg.norm(xy[i] - centre) < 0.6
+    assert not np.any(np.linalg.norm(xy[:, None] - np.array([c for c, _, _ in teeth])[None], axis=2) < 10)
+    assert found.elongation[np.argmin(np.linalg.norm(xy - (100.3, 40.6), axis=1))] > 2.5  # foreshortened, kept

@@ -8,7 +8,8 @@ import pytest
 from mirrorcap.core.geometry.camera import angle_deg
 from mirrorcap.core.capture.views import ClipDetections
 from mirrorcap.core.common.errors import DegenerateError
-from mirrorcap.core.track.selfcal import build_candidates, link_self_calibrated, self_calibrate_mirror
+from mirrorcap.core.track.mirrorscale import both_mirror_samples, link_mirror_scales
+from mirrorcap.core.track.selfcal import build_candidates, self_calibrate_mirror
 from mirrorcap.synthetic.simulate import face_rig, synthetic_detections
 
 
@@ -36,7 +37,10 @@ def test_both_mirrors_from_300_markers_without_a_calibration_object(rig):
         assert r.pairs < 0.03 * r.candidates
         assert _precision(frames, rig, k, r) > 0.9
         assert r.plane.noise_px == pytest.approx(0.1, rel=0.3)
-    ds = link_self_calibrated(frames, rig.camera, results)
+    normals = [r.plane.normal for r in results]
+    samples = both_mirror_samples(ClipDetections.from_frames(frames, rig.camera), rig.camera, normals)
+    ds, figures = link_mirror_scales(samples, normals, [r.plane.d for r in results])
+    assert figures["markers"] > 40 and figures["relative_spread"] < 0.01  # 57 of 300 in both mirrors here
     assert ds[1] / ds[0] == pytest.approx(rig.planes[1][1] / rig.planes[0][1], rel=1e-3)
 
 

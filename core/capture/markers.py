@@ -14,7 +14,14 @@ Per frame, vectorised over pixels and components (no per-marker Python loop):
    marker diameter are one marker (fragments from interlaced fields or broken
    labelling), merged with scipy's KD-tree and graph components;
 5. **remove specks** -- markers under ``min_area`` pixels (default 4) are dropped;
-6. **sub-pixel centre** -- the centroid weighted by ``intensity - threshold``.
+6. **sub-pixel centre** -- the centroid weighted by ``intensity - threshold``;
+7. **blob test** -- teeth and specular glints fluoresce or shine too, as pale, elongated
+   blobs (between the lips, ~0.8 % of the detections on a real face). A blob whose colour is
+   pale (saturation ``1 - 3 min(r, g, b)`` of its normalised mean colour below
+   ``pale_saturation``; the blacklight paints sit at 0.42-0.58) *and* whose weighted second
+   moments give an axis ratio above ``max_elongation`` is dropped. Both must hold: a marker
+   near the face's silhouette is foreshortened into an ellipse but keeps its colour, and a
+   pale round blob may be a marker washed out by the lamp.
 
 OpenCV is used single-threaded by the benchmarks; the extractor reuses its frame
 buffers between frames (:class:`MarkerExtractor`).
@@ -120,6 +127,8 @@ class ExtractionSettings:
     threshold: float = 60.0  # on max(R, G, B), 0..255
     min_area: int = 4  # pixels; smaller markers are specks
     marker_diameter_px: float = 6.0  # merge distance for fragments of one marker
+    pale_saturation: float = 0.2  # blob test: paler than this ...
+    max_elongation: float = 2.0  # ... and longer than this many times its width is not a marker
 
 
 @dataclass
@@ -132,6 +141,7 @@ class Detections:
     area: np.ndarray  # pixels
     intensity: np.ndarray  # mean max(R, G, B) over the marker's pixels
     rgb: np.ndarray = None  # (n, 3) mean colour, normalised to sum 1
+    elongation: np.ndarray = None  # (n,) axis ratio from the weighted second moments (1: round)
 
     def __len__(self):
         return self.x.size
@@ -199,17 +209,12 @@ class MarkerExtractor:
         lab = labels[ys - y0, xs - x0].astype(np.intp)
         wgt = self._value.ravel().take(idx) - float(t)  # intensity - threshold, > 0
         b, g, r = (plane.ravel().take(idx) for plane in self._planes)
-        count = np.bincount(lab, None, n)
-        weight = np.bincount(lab, wgt, n)
-        sums = np.stack([
-            weight, np.bincount(lab, wgt * xs, n), np.bincount(lab, wgt * ys, n), count,
-            weight + t * count,  # sum of intensities, without another pass
-            np.bincount(lab, r, n), np.bincount(lab, g, n), np.bincount(lab, b, n),  # colour: plain sums
-        ], axis=1)[1:]  # drop the background label
+        sums = _blob_sums(lab, n, wgt, xs, ys, r, g, b, t)[1:]  # drop the background label
         cls = self.colors.classify(sums[:, 5:8])
-        cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
+        group = np.arange(sums.shape[0])  # each component's marker
         # merge fragments of one marker: same class, centres closer than a diameter
         if sums.shape[0] > 1 and s.marker_diameter_px > 0:
+            cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
             pairs = cKDTree(np.c_[cx, cy]).query_pairs(s.marker_diameter_px, output_type="ndarray")
             if pairs.size:
                 pairs = pairs[cls[pairs[:, 0]] == cls[pairs[:, 1]]]
@@ -221,11 +226,53 @@ class MarkerExtractor:
                 np.add.at(merged, group, sums)
                 sums = merged
                 cls = self.colors.classify(sums[:, 5:8])
-                cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
-        keep = sums[:, 3] >= s.min_area
-        rgb = sums[keep, 5:8]
+        # step 7, the blob test; a failing blob of two touching markers of different colours is
+        # split by the class of each pixel (the paper's per-pixel labelling) and its saturated parts kept
+        cx, cy, elongation, rgb, saturation = _blob_shape(sums)
+        odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
+        keep = (sums[:, 3] >= s.min_area) & ~odd
+        if odd.any():
+            pix = np.flatnonzero(odd[group][lab - 1] & (lab > 0))
+            pc = self.colors.classify(np.c_[r[pix], g[pix], b[pix]])
+            key = group[lab[pix] - 1] * len(self.colors.names) + pc
+            pieces, inv = np.unique(key, return_inverse=True)
+            part = _blob_sums(inv, pieces.size, wgt[pix], xs[pix], ys[pix], r[pix], g[pix], b[pix], t)
+            pcx, pcy, pel, prgb, psat = _blob_shape(part)
+            ok = (part[:, 3] >= s.min_area) & ~((psat < s.pale_saturation) & (pel > s.max_elongation))
+            sums, cls = np.r_[sums[keep], part[ok]], np.r_[cls[keep], pieces[ok] % len(self.colors.names)]
+            cx, cy = np.r_[cx[keep], pcx[ok]], np.r_[cy[keep], pcy[ok]]
+            elongation, rgb = np.r_[elongation[keep], pel[ok]], np.r_[rgb[keep], prgb[ok]]
+            keep = np.ones(sums.shape[0], bool)
         return Detections(x=cx[keep], y=cy[keep], color=cls[keep], area=sums[keep, 3].astype(int),
-                          intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb / rgb.sum(axis=1, keepdims=True))
+                          intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep])
+
+
+def _blob_sums(label, n, wgt, xs, ys, r, g, b, threshold) -> np.ndarray:
+    """Per-label sums ``(n, 11)``: weight, weighted x and y, pixel count, intensity, plain
+    R, G, B, weighted x^2, y^2, xy (weights: intensity - threshold)."""
+    count = np.bincount(label, None, n)
+    weight = np.bincount(label, wgt, n)
+    return np.stack([
+        weight, np.bincount(label, wgt * xs, n), np.bincount(label, wgt * ys, n), count,
+        weight + threshold * count,  # sum of intensities, without another pass
+        np.bincount(label, r, n), np.bincount(label, g, n), np.bincount(label, b, n),  # colour: plain sums
+        np.bincount(label, wgt * xs * xs, n), np.bincount(label, wgt * ys * ys, n),  # second moments
+        np.bincount(label, wgt * xs * ys, n),
+    ], axis=1)
+
+
+def _blob_shape(sums):
+    """Centre, axis ratio (weighted covariance; + 1/12, a pixel's own extent, so a
+    one-pixel-wide streak has a finite ratio), normalised mean colour and its saturation
+    ``1 - 3 min(r, g, b)`` of blobs from their :func:`_blob_sums`."""
+    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
+    sxx = sums[:, 8] / sums[:, 0] - cx * cx
+    syy = sums[:, 9] / sums[:, 0] - cy * cy
+    sxy = sums[:, 10] / sums[:, 0] - cx * cy
+    half_trace, root = 0.5 * (sxx + syy), np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+    elongation = np.sqrt((half_trace + root + 1.0 / 12.0) / (np.maximum(half_trace - root, 0.0) + 1.0 / 12.0))
+    rgb = sums[:, 5:8] / np.maximum(sums[:, 5:8].sum(axis=1, keepdims=True), 1e-12)
+    return cx, cy, elongation, rgb, 1.0 - 3.0 * rgb.min(axis=1)
 
 
 def extract_markers(frame_bgr: np.ndarray, colors: ColorClasses,
@@ -237,4 +284,4 @@ def extract_markers(frame_bgr: np.ndarray, colors: ColorClasses,
 
 def _empty() -> Detections:
     return Detections(np.zeros(0), np.zeros(0), np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0),
-                      np.zeros((0, 3)))
+                      np.zeros((0, 3)), np.zeros(0))

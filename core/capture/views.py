@@ -75,11 +75,19 @@ class ClipDetections:
 
     def head(self, n: int) -> "ClipDetections":
         """The first ``n`` frames (views into the same arrays; blob indices unchanged)."""
-        n = max(0, min(int(n), self.n_frames))
-        ends = [int(s[n]) for s in self.start]
-        return ClipDetections(n, [a[:e] for a, e in zip(self.xy, ends)], [a[:e] for a, e in zip(self.norm, ends)],
-                              [a[:e] for a, e in zip(self.colour, ends)], [a[:e] for a, e in zip(self.frame, ends)],
-                              [s[:n + 1] for s in self.start])
+        return self.window(0, n)
+
+    def window(self, first: int, stop: int) -> "ClipDetections":
+        """Frames ``first:stop`` as a clip of their own (array views; blob indices and frame
+        numbers count from ``first``, so they are the window's own)."""
+        a = max(0, min(int(first), self.n_frames))
+        b = max(a, min(int(stop), self.n_frames))
+        lo = [int(s[a]) for s in self.start]
+        hi = [int(s[b]) for s in self.start]
+        cut = [slice(x, y) for x, y in zip(lo, hi)]
+        return ClipDetections(b - a, [v[c] for v, c in zip(self.xy, cut)], [v[c] for v, c in zip(self.norm, cut)],
+                              [v[c] for v, c in zip(self.colour, cut)], [v[c] - a for v, c in zip(self.frame, cut)],
+                              [s[a:b + 1] - x for s, x in zip(self.start, lo)])
 
     def frame_view(self, f: int, v: int) -> slice:
         return slice(int(self.start[v][f]), int(self.start[v][f + 1]))

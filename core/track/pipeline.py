@@ -10,7 +10,13 @@ face is put ``face_distance_mm`` (600) from the camera, which makes the units cl
 ``--known-length`` makes them exact.
 
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
-self-calibration); ``frames`` (first, last, step, count, fps); ``markers`` (count,
+self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's distance was put in
+mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
+samples, markers; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
+markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
+the two mirrors in take units, the expected sd, noise_px, relative_difference, ``consistent``:
+false -- with a warning -- when the median difference exceeds twice the expected sd; null when too
+few markers are seen in both); ``frames`` (first, last, step, count, fps); ``markers`` (count,
 labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file",
 "settings" (the add-on's) or "automatic"; ``undecided``: direct-view markers of the first frames that could not be
 paired with a mirror image and were not found later, each with the frame and pixel position
@@ -102,7 +108,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     ``rigid``: the markers that carry the head pose, as :func:`core.track.tracker.track` takes them.
     Without MIRRORS.json the scale is set by putting the face ``face_distance_mm`` away.
     Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``."""
-    from .selfcal import link_self_calibrated, self_calibrate_mirror
+    from .mirrorscale import both_mirror_samples, link_mirror_scales, mirror_agreement
+    from .selfcal import self_calibrate_mirror
 
     if len(frames) < 2:
         raise InputError("tracking needs at least 2 frames")
@@ -113,7 +120,9 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
             raise DegenerateError("a mirror shows fewer than 6 markers in the first frames: are both mirrors "
                                   "visible? (give MIRRORS.json from `mirrorcap mirrors` otherwise)")
         cals = [self_calibrate_mirror(first, camera, k) for k in range(2)]
-        ds = link_self_calibrated(first, camera, cals)
+        normals = np.stack([c.plane.normal for c in cals])
+        both = both_mirror_samples(det, camera, normals)
+        ds, scale_link = link_mirror_scales(both, normals, [c.plane.d for c in cals])
         # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
         # levels are in mm, so put the face at its nominal distance: the take is then
         # "relative" units that are close to millimetres (a known length makes them exact).
@@ -122,6 +131,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         mirror_source, units = "self-calibration", "relative"
     else:
         planes, mirror_source, units = list(mirrors), "file", "mm"
+        both = both_mirror_samples(det, camera, np.stack([p.normal for p in planes]))
+        scale_link = None
     t1 = time.perf_counter()
     result = track(det, camera, planes, settings, progress=progress, rigid=rigid)
     t_track = time.perf_counter() - t1
@@ -144,6 +155,16 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         units = "mm"
     rate = fps
     log = log if log is not None else MessageLog()
+    agreement = mirror_agreement(both, np.stack([p.normal for p in planes]), np.array([p.d for p in planes]),
+                                 camera.focal_px)
+    if agreement["consistent"] is False:
+        unit = "mm" if units == "mm" else "units"
+        log.warning(f"the two mirrors disagree: a marker seen in both lands {agreement['median_difference']:+.2f} "
+                    f"{unit} ({100 * agreement['relative_difference']:+.2f} %) further along its ray through mirror 0 "
+                    f"than through mirror 1, where {agreement['expected_sd']:.2f} {unit} is expected "
+                    f"({agreement['markers']} markers); the take's 3D points are off by up to that much -- "
+                    + ("check MIRRORS.json, or track without it to self-calibrate" if mirror_source == "file"
+                       else "the mirrors moved, or the clip shows too few markers in both mirrors"))
     if result.undecided:
         log.warning(f"{len(result.undecided)} direct-view markers of the first frames could not be paired with a "
                     "mirror image (no 3D position): REPORT.json markers.undecided lists where they are")
@@ -151,6 +172,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         "units": units,
         "mirrors": [{"mirror": k, "normal": [float(v) for v in p.normal], "d": float(p.d), "source": mirror_source}
                     for k, p in enumerate(planes)],
+        "mirror_scale_link": scale_link,
+        "mirror_agreement": agreement,
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
                     "rigid": [result.labels[i] for i in result.rigid],

@@ -231,25 +231,3 @@ def _one_to_one(c: Candidates, u, threshold: float) -> np.ndarray:
         lookup = coo_matrix((sel + 1, (dinv, minv)), shape=(di.size, mi.size)).tocsr()
         chosen.append(np.asarray(lookup[rows[good], cols[good]]).ravel() - 1)
     return np.concatenate(chosen).astype(int)
-
-
-def link_self_calibrated(det: ClipDetections, camera: Camera, results) -> np.ndarray:
-    """The ``d`` of each mirror in the units of mirror 0, through direct blobs paired
-    in both mirrors (their depths must agree). Returns ``ds``."""
-    if len(results) < 2:
-        return np.array([r.plane.d for r in results])
-    det = ClipDetections.of(det, camera)
-    cands = [build_candidates(det, k) for k in range(len(results))]
-    pairs = [_one_to_one(c, r.plane.normal, 0.5 / camera.focal_px) for c, r in zip(cands, results)]
-    ds = np.array([r.plane.d for r in results], dtype=float)
-    z = []
-    for c, pr, r in zip(cands, pairs, results):
-        depth, _ = depths_from_planes(c.p[pr], c.pm[pr][None], r.plane.normal[None], np.array([r.plane.d]))
-        z.append(dict(zip(c.direct_blob[pr].tolist(), depth.tolist())))
-    for k in range(1, len(results)):
-        shared = sorted(set(z[0]) & set(z[k]))
-        if not shared:
-            raise DegenerateError("no marker is paired in both mirrors, so their scales cannot be related")
-        ratio = np.median([z[0][i] / z[k][i] for i in shared])
-        ds[k] *= ratio
-    return ds

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..common.errors import DegenerateError
 from ..geometry.camera import Camera
-from ..geometry.mirror import MirrorPlane, points_from_planes
+from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
@@ -46,28 +46,8 @@ from .motion import (
     neighbours,
     previous_and_next,
 )
-from .pairing import pair_tracks, track_2d
+from .pairing import paired_tracks
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
-
-
-def _paired_tracks(det: ClipDetections, camera, normals, ds, band_px: float, min_frames: int):
-    """2D tracks of the direct view and of each mirror over the frames of ``det``, and each direct
-    track's partner track per mirror (``core.track.pairing``; -1: none). Returns
-    ``(direct ids per frame, number of direct tracks, partner (K, n), mirror ids per
-    frame per mirror, ambiguous (K, n): tracks with rival partners in that mirror)``."""
-    dids, n_dt = track_2d(det.per_frame(0), det.per_frame(0, "colour"))
-    K = len(normals)
-    partner = np.full((K, n_dt), -1)
-    ambiguous = np.zeros((K, n_dt), bool)
-    mids_all = []
-    for k in range(K):
-        mids, _ = track_2d(det.per_frame(k + 1), det.per_frame(k + 1, "colour"))
-        pairs = pair_tracks(det, dids, k, mids, camera, MirrorPlane(normal=normals[k], d=float(ds[k])),
-                            band_px=band_px, min_frames=min_frames)
-        partner[k, pairs.direct_track] = pairs.mirror_track
-        ambiguous[k, pairs.ambiguous] = True
-        mids_all.append(mids)
-    return dids, n_dt, partner, mids_all, ambiguous
 
 
 def _undecided(det: ClipDetections, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
@@ -143,7 +123,7 @@ def _initial_markers(det: ClipDetections, camera, normals, ds, settings):
     here 0; and the undecided direct-view tracks (:func:`_undecided`)."""
     W = min(settings.init_frames, det.n_frames)
     init = det.head(W)
-    dids, n_dt, partner, mids_all, ambiguous = _paired_tracks(init, camera, normals, ds, settings.band_px,
+    dids, n_dt, partner, mids_all, ambiguous, _ = paired_tracks(init, camera, normals, settings.band_px,
                                                                min(5, W))
     undecided = _undecided(init, dids, n_dt, partner, ambiguous, min(5, W))
     undecided["blobs"] = [np.asarray(d, int) for d in dids]  # track id of each direct blob, per frame

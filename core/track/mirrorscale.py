@@ -1,0 +1,166 @@
+"""The two mirrors' scales, and whether a take's mirrors agree (issue #18, part 1).
+
+Self-calibration (:mod:`.selfcal`) finds each mirror's normal and leaves its distance ``d``
+in units of its own. A marker seen in the direct view and in *both* mirrors fixes the
+ratio of the two distances: its depth along the direct ray (eq. 3.10-3.11) is the same
+through either mirror, and each depth is proportional to its mirror's ``d``. Pairing single
+frames one-to-one inside the band is only 75-94 % correct on dense layouts
+(``shared/notes/mirror-self-calibration.md``), which moved the ratio by 2 % on a 290-marker
+rig; pairs between *2D tracks* (:func:`.pairing.paired_tracks`) are >= 99.5 % precise.
+
+:func:`both_mirror_samples` collects such markers from a few windows of frames spread over
+the clip; :func:`link_mirror_scales` takes the ratio as their median (robust to the rare
+wrong pair); :func:`mirror_agreement` tests a take's planes -- self-calibrated or from
+MIRRORS.json -- on the same markers: through the two mirrors a marker must land at the same
+depth within its expected error (the detection noise, from the pairs' band residuals,
+propagated through eq. 3.10-3.11 for each mirror).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..capture.views import ClipDetections
+from ..common.errors import DegenerateError
+from ..geometry.camera import Camera
+from ..geometry.mirror import depths_from_planes
+from .pairing import paired_tracks
+
+WINDOW_FRAMES = 15       # frames per window of 2D tracks (as the tracker's initial pairing)
+WINDOWS = 4              # windows spread over the clip
+AGREEMENT_LIMIT = 2.0    # a take's mirrors disagree when the typical marker is off by more than 2 expected sd
+
+
+@dataclass
+class BothMirrorSamples:
+    """Markers seen in the direct view and both mirrors, one row per (marker, frame):
+    normalised direct ``p`` ``(S, 2)`` and mirrored ``pm`` ``(2, S, 2)`` points, the
+    ``marker`` ``(S,)`` (a direct 2D track, unique over the windows) and the detection
+    noise ``noise_px`` (median band residual of the pairs, pixels)."""
+
+    p: np.ndarray
+    pm: np.ndarray
+    marker: np.ndarray
+    noise_px: float
+
+    @property
+    def n_markers(self) -> int:
+        return int(np.unique(self.marker).size)
+
+
+def both_mirror_samples(det: ClipDetections, camera: Camera, normals, band_px: float = 1.0,
+                        window: int = WINDOW_FRAMES, windows: int = WINDOWS) -> BothMirrorSamples:
+    """Markers seen directly and in both mirrors in ``windows`` windows of ``window`` frames
+    spread evenly over ``det``, paired through 2D tracks (:func:`.pairing.paired_tracks`;
+    a direct track counts when it has an unambiguous partner track in each mirror)."""
+    normals = np.asarray(normals, float)
+    if len(normals) != 2:
+        raise ValueError("two mirrors are needed to relate their scales")
+    F = det.n_frames
+    W = min(window, F)
+    starts = np.unique(np.linspace(0, F - W, max(1, min(windows, F // max(W, 1)))).round().astype(int))
+    p_all, pm_all, marker_all, rms_all = [], [[], []], [], []
+    offset = 0
+    for s in starts:
+        sub = det.window(s, s + W)
+        dids, n_dt, partner, mids, ambiguous, rms = paired_tracks(sub, camera, normals, band_px, min(5, W))
+        both = np.all(partner >= 0, axis=0) & ~np.any(ambiguous, axis=0)
+        rms_all.append(rms[:, both].ravel())
+        for f in range(sub.n_frames):
+            ids = np.asarray(dids[f], int)
+            if ids.size == 0:
+                continue
+            sel = np.flatnonzero(both[ids])
+            if sel.size == 0:
+                continue
+            blob = []
+            for k in range(2):
+                lookup = np.full(max(int(partner[k].max()) + 1, 1) if partner[k].size else 1, -1)
+                m_ids = np.asarray(mids[k][f], int)
+                if m_ids.size:
+                    inside = m_ids < lookup.size
+                    lookup[m_ids[inside]] = np.flatnonzero(inside)
+                blob.append(lookup[partner[k, ids[sel]]])
+            ok = (blob[0] >= 0) & (blob[1] >= 0)
+            if not ok.any():
+                continue
+            d0 = sub.frame_view(f, 0)
+            p_all.append(sub.norm[0][d0][sel[ok]])
+            for k in range(2):
+                pm_all[k].append(sub.norm[k + 1][sub.frame_view(f, k + 1)][blob[k][ok]])
+            marker_all.append(ids[sel[ok]] + offset)
+        offset += n_dt
+    if not p_all:
+        return BothMirrorSamples(np.zeros((0, 2)), np.zeros((2, 0, 2)), np.zeros(0, int), float("nan"))
+    rms = np.concatenate(rms_all)
+    rms = rms[np.isfinite(rms)]
+    return BothMirrorSamples(np.concatenate(p_all), np.stack([np.concatenate(x) for x in pm_all]),
+                             np.concatenate(marker_all), float(np.median(rms)) if rms.size else float("nan"))
+
+
+def _along_ray(p, pm, normal, d) -> np.ndarray:
+    """Distance from the camera along the direct ray through one mirror (eq. 3.10-3.11)."""
+    z, _ = depths_from_planes(p, pm[None], np.asarray(normal, float)[None], np.array([float(d)]))
+    return z * np.sqrt(1.0 + np.einsum("ij,ij->i", p, p))
+
+
+def link_mirror_scales(samples: BothMirrorSamples, normals, ds) -> tuple[np.ndarray, dict]:
+    """``ds`` with mirror 1's distance put in mirror 0's units: scaled by the median over
+    ``samples`` of the ratio of a marker's depth through mirror 0 to its depth through
+    mirror 1. Returns the new ``ds`` and the figures (ratio, its robust relative spread
+    1.4826 MAD, standard error, samples, markers)."""
+    if len(samples.p) < 10:
+        raise DegenerateError(f"only {len(samples.p)} sightings of markers in both mirrors: the two mirrors' scales "
+                              "cannot be related (give MIRRORS.json from `mirrorcap mirrors`)")
+    z0 = _along_ray(samples.p, samples.pm[0], normals[0], ds[0])
+    z1 = _along_ray(samples.p, samples.pm[1], normals[1], ds[1])
+    good = np.isfinite(z0) & np.isfinite(z1) & (np.abs(z1) > 0)
+    ratio = z0[good] / z1[good]
+    r = float(np.median(ratio))
+    spread = float(1.4826 * np.median(np.abs(ratio - r)) / abs(r))
+    out = np.array(ds, float)
+    out[1] *= r
+    figures = {"source": "markers tracked in both mirrors", "ratio": r, "relative_spread": spread,
+               "standard_error": float(1.2533 * spread / np.sqrt(max(good.sum(), 1))),
+               "samples": int(good.sum()), "markers": int(np.unique(samples.marker[good]).size)}
+    return out, figures
+
+
+def mirror_agreement(samples: BothMirrorSamples, normals, ds, focal_px: float) -> dict:
+    """Do the planes ``(normals, ds)`` put each marker seen in both mirrors at one depth?
+    Per sighting: the difference of its distances along the direct ray through mirror 0
+    and mirror 1 (take units), and its expected sd -- the detection noise ``noise_px``
+    moved along each mirror's epipolar line (the direction that changes the depth,
+    eq. 5.2) through eq. 3.10-3.11. ``consistent`` is False when the median difference
+    exceeds ``AGREEMENT_LIMIT`` times the median expected sd."""
+    n = len(samples.p)
+    if n < 10 or not np.isfinite(samples.noise_px):
+        return {"samples": int(n), "markers": samples.n_markers, "consistent": None,
+                "reason": "too few markers seen in both mirrors to compare them"}
+    p, pm = samples.p, samples.pm
+    along = []
+    slope = []
+    for k in range(2):
+        u = np.asarray(normals[k], float)
+        z = _along_ray(p, pm[k], u, ds[k])
+        # the mirrored point's epipolar line u x p (eq. 5.2) runs along (-l1, l0)
+        l0 = u[1] - u[2] * p[:, 1]
+        l1 = u[2] * p[:, 0] - u[0]
+        step = np.c_[-l1, l0] / np.hypot(l0, l1)[:, None] / focal_px  # one pixel along the line
+        z_step = _along_ray(p, pm[k] + step, u, ds[k])
+        along.append(z)
+        slope.append(np.abs(z_step - z))  # take units per pixel
+    diff = along[0] - along[1]
+    expected = samples.noise_px * np.hypot(slope[0], slope[1])
+    good = np.isfinite(diff) & np.isfinite(expected)
+    diff, expected = diff[good], expected[good]
+    median = float(np.median(diff))
+    expected_median = float(np.median(expected))
+    return {"samples": int(good.sum()), "markers": int(np.unique(samples.marker[good]).size),
+            "median_difference": median, "median_abs_difference": float(np.median(np.abs(diff))),
+            "p95_abs_difference": float(np.percentile(np.abs(diff), 95)),
+            "expected_sd": expected_median, "noise_px": samples.noise_px,
+            "relative_difference": float(np.median(diff / ((along[0] + along[1])[good] / 2))),
+            "consistent": bool(abs(median) <= AGREEMENT_LIMIT * expected_median)}
