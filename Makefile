@@ -53,5 +53,5 @@ contact-sheet: $(STAMP)
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
-	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/motion --head-deg 10 15 4 --tempo 2.5 \
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/motion --head-deg 10 15 4 --tempo 2.5 --samples 4 \
 		--frames 300 --seed 12 --no-scan

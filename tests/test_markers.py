@@ -198,7 +198,8 @@ def _ellipse_blob(shape, centre, sigmas, angle_deg, rgb):
 def test_blob_test_drops_teeth_keeps_foreshortened_markers_and_splits_touching_ones():
     """Teeth under UV: pale, elongated streaks -> dropped. A marker at the silhouette,
     foreshortened 3:1 but saturated -> kept where it is. Two touching markers of different
-    colours, one pale elongated component -> split into both, each in its class."""
+    colours, one pale elongated component -> dropped, or with ``split_pale_blobs`` split into
+    both, each in its class."""
     names = mk.ColorClasses.default().names
     img = np.zeros((120, 200, 3))
     teeth = [((40, 30), (7.0, 1.6), 5), ((40, 90), (9.0, 2.0), -10)]       # pale blue-white
@@ -209,7 +210,11 @@ def test_blob_test_drops_teeth_keeps_foreshortened_markers_and_splits_touching_o
     img += _ellipse_blob(img.shape[:2], a, (1.6, 1.6), 0, mk.DEFAULT_CLASSES["blue-green"][0])
     img += _ellipse_blob(img.shape[:2], b, (1.6, 1.6), 0, mk.DEFAULT_CLASSES["pink"][0])
     img = np.clip(img, 0, 255).astype(np.uint8)
-    found = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(threshold=30))
+    dropped = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(threshold=30))
+    assert len(dropped) == 1 and names[dropped.color[0]] == "pink"  # by default only the marker stays
+    assert np.hypot(dropped.x[0] - 100.3, dropped.y[0] - 40.6) < 0.6
+    found = mk.extract_markers(img, mk.ColorClasses.default(),
+                               mk.ExtractionSettings(threshold=30, split_pale_blobs=True))
     off = mk.extract_markers(img, mk.ColorClasses.default(),
                              mk.ExtractionSettings(threshold=30, pale_saturation=0.0))  # the test turned off
     assert len(off) == 4  # two teeth, the marker, the touching pair as one blob

@@ -16,10 +16,14 @@ Per frame, vectorised over pixels and components (no per-marker Python loop):
 5. **remove specks** -- markers under ``min_area`` pixels (default 4) are dropped;
 6. **sub-pixel centre** -- the centroid weighted by ``intensity - threshold``;
 7. **blob test** -- teeth and specular glints fluoresce or shine too, as pale, elongated
-   blobs (between the lips, ~0.8 % of the detections on a real face). A blob whose colour is
+   blobs (between the lips, ~0.8 % of the detections on a real face), and two touching
+   markers of different colours make one pale, elongated component. A blob whose colour is
    pale (saturation ``1 - 3 min(r, g, b)`` of its normalised mean colour below
    ``pale_saturation``; the blacklight paints sit at 0.42-0.58) *and* whose weighted second
-   moments give an axis ratio above ``max_elongation`` is dropped. Both must hold: a marker
+   moments give an axis ratio above ``max_elongation`` is dropped (its centre is no marker's);
+   with ``split_pale_blobs`` it is split by the colour class of each of its pixels and the
+   parts that pass the test are kept (touching markers come back, but intermittently, as
+   late markers that lower a take's completeness: off by default). Both must hold: a marker
    near the face's silhouette is foreshortened into an ellipse but keeps its colour, and a
    pale round blob may be a marker washed out by the lamp.
 
@@ -129,6 +133,7 @@ class ExtractionSettings:
     marker_diameter_px: float = 6.0  # merge distance for fragments of one marker
     pale_saturation: float = 0.2  # blob test: paler than this ...
     max_elongation: float = 2.0  # ... and longer than this many times its width is not a marker
+    split_pale_blobs: bool = False  # split such a blob by per-pixel class and keep its saturated parts
 
 
 @dataclass
@@ -231,7 +236,7 @@ class MarkerExtractor:
         cx, cy, elongation, rgb, saturation = _blob_shape(sums)
         odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
         keep = (sums[:, 3] >= s.min_area) & ~odd
-        if odd.any():
+        if odd.any() and s.split_pale_blobs:
             pix = np.flatnonzero(odd[group][lab - 1] & (lab > 0))
             pc = self.colors.classify(np.c_[r[pix], g[pix], b[pix]])
             key = group[lab[pix] - 1] * len(self.colors.names) + pc

@@ -16,7 +16,7 @@ from .result import COLOUR_SPACING_MM, TrackSettings, earns_place
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
                       focal_px: float, link_mm: float = 1.0, link_frames: int = 3, min_frames: int = 5,
                       same_marker_mm: float = 4.0, same_ray_px: float = 2.0, min_support: float = 0.6,
-                      max_rms_factor: float = 2.0):
+                      max_rms_factor: float = 2.0, off_face_mm: float = 10.0):
     """Markers the initial window missed (hidden at the start, turned into view later).
 
     Candidates the first pass left alone -- their direct blob and their mirror blobs
@@ -30,7 +30,9 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     within ``same_ray_px`` of its image (its direct blob, paired with a wrong mirror
     blob), is that marker found again and is not added; nor is one whose neutral
     position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
-    blob with a better supported chain. Chance pairings with false blobs
+    blob with a better supported chain, nor one off the face: more than ``off_face_mm`` along its
+    ray, where it is first seen, from the surface through the markers measured then (:func:`_off_the_face`; a direct blob paired with
+    another marker's mirror image lands along its ray, typically ~45 mm away). Chance pairings with false blobs
     are scattered in space and time and do not chain. A marker added gets as its
     neutral position where it was first seen, less its neighbours' motion then
     (:func:`_motion_near`), and is measured from the first frame of its chains on
@@ -116,6 +118,10 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
             continue
         if real.any() and np.min(np.linalg.norm(neutral[real] - at_rest[c], axis=1)) <= same_marker_mm:
             continue
+        q = entry_of[c]  # where the chain is first seen: off the face as the camera sees it then?
+        seen_then = first_pass.points[f[q]][real]
+        if _off_the_face(seen_then[np.all(np.isfinite(seen_then), axis=1)], cands.points[idx[q]], off_face_mm):
+            continue
         if keep:
             gap = np.linalg.norm(at_rest[keep] - at_rest[c], axis=1)
             if gap.min() <= same_marker_mm:  # another stretch of a marker kept: it is seen from then
@@ -131,6 +137,26 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
         return markers
     return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
             np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
+
+
+def _off_the_face(neutral, point, off_mm: float, k: int = 6) -> bool:
+    """Is ``point`` more than ``off_mm`` along its ray from the face formed by the markers
+    ``neutral`` ``(N, 3)`` (one frame, camera frame: the frame the point is seen in, so the
+    face there faces the camera)? The face: the plane ``z = a x' + b y' + c`` (``x' = x/z``,
+    ``y' = y/z``, the ray's direction) through the ``k`` markers nearest to its ray, least
+    squares; where the plane fits them loosely (the face curving away) the limit grows to 4x
+    that misfit. With fewer than ``k`` markers nothing is decided."""
+    if len(neutral) < k or not np.all(np.isfinite(point)) or point[2] <= 0:
+        return False
+    rays = neutral[:, :2] / neutral[:, 2:3]
+    ray = point[:2] / point[2]
+    near = np.argsort(np.linalg.norm(rays - ray, axis=1))[:k]
+    A = np.c_[rays[near], np.ones(k)]
+    coef, *_ = np.linalg.lstsq(A, neutral[near, 2], rcond=None)
+    z_face = float(np.r_[ray, 1.0] @ coef)
+    # where the face curves away (the silhouette) the plane fits its own markers loosely: allow that
+    spread = float(np.sqrt(np.mean((A @ coef - neutral[near, 2]) ** 2)))
+    return abs(point[2] - z_face) * float(np.sqrt(1.0 + ray @ ray)) > max(off_mm, 4.0 * spread)
 
 
 def _frame_spaced(points, frame, within: float, *extent) -> np.ndarray:

@@ -161,6 +161,7 @@ def mirror_agreement(samples: BothMirrorSamples, normals, ds, focal_px: float) -
     return {"samples": int(good.sum()), "markers": int(np.unique(samples.marker[good]).size),
             "median_difference": median, "median_abs_difference": float(np.median(np.abs(diff))),
             "p95_abs_difference": float(np.percentile(np.abs(diff), 95)),
-            "expected_sd": expected_median, "noise_px": samples.noise_px,
+            "expected_sd": expected_median, "observed_sd": float(1.4826 * np.median(np.abs(diff - median))),
+            "noise_px": samples.noise_px,
             "relative_difference": float(np.median(diff / ((along[0] + along[1])[good] / 2))),
             "consistent": bool(abs(median) <= AGREEMENT_LIMIT * expected_median)}
