@@ -66,10 +66,6 @@ class ClipDetections:
         (nothing normalised again), else :meth:`from_frames`."""
         return frames if isinstance(frames, cls) else cls.from_frames(frames, camera)
 
-    @property
-    def n_mirrors(self) -> int:
-        return len(self.xy) - 1
-
     def __len__(self) -> int:
         return self.n_frames
 

@@ -31,8 +31,9 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     blob), is that marker found again and is not added; nor is one whose neutral
     position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
     blob with a better supported chain, nor one off the face: more than ``off_face_mm`` along its
-    ray, where it is first seen, from the surface through the markers measured then (:func:`_off_the_face`; a direct blob paired with
-    another marker's mirror image lands along its ray, typically ~45 mm away). Chance pairings with false blobs
+    ray, where it is first seen, from the surface through the markers measured then
+    (:func:`_off_the_face`; a direct blob paired with another marker's mirror image lands
+    along its ray, typically ~45 mm away). Chance pairings with false blobs
     are scattered in space and time and do not chain. A marker added gets as its
     neutral position where it was first seen, less its neighbours' motion then
     (:func:`_motion_near`), and is measured from the first frame of its chains on

@@ -26,7 +26,7 @@ from ..capture.views import ClipDetections
 from ..common.errors import DegenerateError
 from ..geometry.camera import Camera
 from ..geometry.mirror import depths_from_planes
-from .pairing import paired_tracks
+from .pairing import paired_tracks, partner_blobs
 
 WINDOW_FRAMES = 15       # frames per window of 2D tracks (as the tracker's initial pairing)
 WINDOWS = 4              # windows spread over the clip
@@ -68,31 +68,14 @@ def both_mirror_samples(det: ClipDetections, camera: Camera, normals, band_px: f
         dids, n_dt, partner, mids, ambiguous, rms = paired_tracks(sub, camera, normals, band_px, min(5, W))
         both = np.all(partner >= 0, axis=0) & ~np.any(ambiguous, axis=0)
         rms_all.append(rms[:, both].ravel())
-        for f in range(sub.n_frames):
-            ids = np.asarray(dids[f], int)
-            if ids.size == 0:
-                continue
-            sel = np.flatnonzero(both[ids])
-            if sel.size == 0:
-                continue
-            blob = []
-            for k in range(2):
-                lookup = np.full(max(int(partner[k].max()) + 1, 1) if partner[k].size else 1, -1)
-                m_ids = np.asarray(mids[k][f], int)
-                if m_ids.size:
-                    inside = m_ids < lookup.size
-                    lookup[m_ids[inside]] = np.flatnonzero(inside)
-                blob.append(lookup[partner[k, ids[sel]]])
-            ok = (blob[0] >= 0) & (blob[1] >= 0)
-            if not ok.any():
-                continue
-            d0 = sub.frame_view(f, 0)
-            p_all.append(sub.norm[0][d0][sel[ok]])
-            for k in range(2):
-                pm_all[k].append(sub.norm[k + 1][sub.frame_view(f, k + 1)][blob[k][ok]])
-            marker_all.append(ids[sel[ok]] + offset)
+        track, blob = partner_blobs(sub, dids, partner, mids)
+        sel = np.flatnonzero(both[track] & np.all(blob >= 0, axis=0))
+        p_all.append(sub.norm[0][sel])
+        for k in range(2):
+            pm_all[k].append(sub.norm[k + 1][blob[k, sel]])
+        marker_all.append(track[sel] + offset)
         offset += n_dt
-    if not p_all:
+    if not sum(len(p) for p in p_all):
         return BothMirrorSamples(np.zeros((0, 2)), np.zeros((2, 0, 2)), np.zeros(0, int), float("nan"))
     rms = np.concatenate(rms_all)
     rms = rms[np.isfinite(rms)]

@@ -88,7 +88,8 @@ class TrackPairs:
     ambiguous: np.ndarray  # direct tracks with more than one plausible partner, left unpaired
 
 
-def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera: Camera, plane: MirrorPlane, band_px: float = 1.0, min_frames: int = 5, min_agreement: float = 0.8,
+def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera: Camera, plane: MirrorPlane,
+                band_px: float = 1.0, min_frames: int = 5, min_agreement: float = 0.8,
                 ambiguity_ratio: float = 0.5, max_rms_factor: float = 2.0) -> TrackPairs:
     """Pair direct-view tracks with tracks of mirror ``mirror`` (module docstring):
     ``det`` holds the detections (:class:`..capture.views.ClipDetections`, read in
@@ -198,3 +199,28 @@ def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float =
         ambiguous[k, pairs.ambiguous] = True
         mids_all.append(mids)
     return dids, n_dt, partner, mids_all, ambiguous, rms_px
+
+
+def partner_blobs(det: ClipDetections, direct_ids, partner, mirror_ids):
+    """For every direct blob of ``det`` (global index): its direct track ``(D,)`` and, per
+    mirror, the blob of its partner track in the same frame ``(K, D)`` (global index in that
+    mirror's view; -1 where the blob's track has no partner or the partner is not seen then).
+    ``direct_ids``, ``partner`` and ``mirror_ids`` as :func:`paired_tracks` returns them; a 2D
+    track holds at most one blob per frame, so (frame, track) finds one blob, by a sorted search."""
+    track = np.concatenate([np.asarray(d, int) for d in direct_ids]) if len(direct_ids) else np.zeros(0, int)
+    K = partner.shape[0]
+    blob = np.full((K, track.size), -1)
+    for k in range(K):
+        m_track = (np.concatenate([np.asarray(m, int) for m in mirror_ids[k]]) if len(mirror_ids[k])
+                   else np.zeros(0, int))
+        if m_track.size == 0 or track.size == 0:
+            continue
+        n = int(m_track.max()) + 1
+        key = det.frame[k + 1] * n + m_track
+        order = np.argsort(key, kind="stable")
+        mate = partner[k, track]
+        want = det.frame[0] * n + np.maximum(mate, 0)
+        at = np.minimum(np.searchsorted(key[order], want), key.size - 1)
+        hit = (mate >= 0) & (key[order][at] == want)
+        blob[k, hit] = order[at[hit]]
+    return track, blob

@@ -14,9 +14,9 @@ self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's 
 mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
 samples, markers; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
-the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px, relative_difference, ``consistent``:
-false -- with a warning -- when the median difference exceeds twice the expected sd; null when too
-few markers are seen in both); ``frames`` (first, last, step, count, fps); ``markers`` (count,
+the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px,
+relative_difference, ``consistent``: false -- with a warning -- when the median difference
+exceeds twice the expected sd; null when too few markers are seen in both); ``frames`` (first, last, step, count, fps); ``markers`` (count,
 labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file",
 "settings" (the add-on's) or "automatic"; ``undecided``: direct-view markers of the first frames that could not be
 paired with a mirror image and were not found later, each with the frame and pixel position

@@ -46,7 +46,7 @@ from .motion import (
     neighbours,
     previous_and_next,
 )
-from .pairing import paired_tracks
+from .pairing import paired_tracks, partner_blobs
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
 
 
@@ -77,39 +77,26 @@ def _track_positions(det: ClipDetections, normals, ds, dids, n_dt, partner, mids
     """3D position of chosen direct tracks in every frame where the track and one of
     its partner mirror tracks both have a blob (fused over mirrors): ``pos (F, M, 3)``
     (NaN elsewhere, each frame's own camera coordinates), the direct blob per frame
-    ``(F, M)`` (-1: absent) and each track's colour ``(M,)``. Vectorised per frame
-    through lookup arrays."""
+    ``(F, M)`` (-1: absent) and each track's colour ``(M,)``. Vectorised over the whole
+    window (:func:`.pairing.partner_blobs`)."""
     F, M, K = det.n_frames, len(tracks), len(normals)
     col_of = np.full(n_dt, -1)
     col_of[tracks] = np.arange(M)
-    n_mt = [1 + max((int(m.max()) for m in mids_all[k] if len(m)), default=0) for k in range(K)]
     pos = np.full((F, M, 3), np.nan)
     blob = np.full((F, M), -1)
     colour = np.full(M, -1)
-    for f in range(F):
-        here = col_of[dids[f]] if len(dids[f]) else np.zeros(0, int)
-        sel = np.flatnonzero(here >= 0)
-        if sel.size == 0:
-            continue
-        marker = here[sel]
-        blob[f, marker] = sel
-        unset = colour[marker] < 0
-        direct = det.frame_view(f, 0)
-        colour[marker[unset]] = det.colour[0][direct][sel[unset]]
-        vis = np.zeros((K, sel.size), bool)
-        pm = np.zeros((K, sel.size, 2))
-        for k in range(K):
-            blob_of = np.full(n_mt[k], -1)
-            blob_of[mids_all[k][f]] = np.arange(len(mids_all[k][f]))
-            mate = partner[k, tracks[marker]]
-            j = np.where(mate >= 0, blob_of[np.maximum(mate, 0)], -1)
-            vis[k] = j >= 0
-            if vis[k].any():
-                pm[k, vis[k]] = det.norm[k + 1][det.frame_view(f, k + 1)][j[vis[k]]]
-        ok = vis.any(axis=0)
-        if ok.any():
-            pos[f, marker[ok]] = points_from_planes(det.norm[0][direct][sel[ok]], pm[:, ok],
-                                                    normals, ds, visible=vis[:, ok])
+    track, mirror_blob = partner_blobs(det, dids, partner, mids_all)
+    sel = np.flatnonzero(col_of[track] >= 0)  # the chosen tracks' blobs, in frame order
+    f, marker = det.frame[0][sel], col_of[track[sel]]
+    blob[f, marker] = sel - det.start[0][f]  # the blob's index in its frame
+    _, first = np.unique(marker, return_index=True)
+    colour[marker[first]] = det.colour[0][sel[first]]
+    vis = mirror_blob[:, sel] >= 0
+    ok = vis.any(axis=0)
+    pm = np.stack([det.norm[k + 1][np.maximum(mirror_blob[k, sel[ok]], 0)] if len(det.norm[k + 1])
+                   else np.zeros((int(ok.sum()), 2)) for k in range(K)])
+    if ok.any():
+        pos[f[ok], marker[ok]] = points_from_planes(det.norm[0][sel[ok]], pm, normals, ds, visible=vis[:, ok])
     return pos, blob, colour
 
 
