@@ -14,7 +14,10 @@ What it makes, in ``sample_scenes/rig_clip/``:
                     neutral ``subject_vertices (V, 3)`` (the generic head's topology),
                     ``performance_seed`` (the performance is
                     ``core.headsim.performance(generic head, its shape keys, F, fps, seed)``) and
-                    ``scan_rotation``, ``scan_translation`` (scan = R subject + t).
+                    ``scan_rotation``, ``scan_translation`` (scan = R subject + t);
+                    ``visible (F, 3, M)``: marker seen in the direct view, mirror 0, mirror 1
+                    (skin within 73 degrees of facing the view, inside its rectangle, on the
+                    panel, the light path clear of the head).
 - ``scan.ply``      a scan-like mesh of the subject's neutral face: the front of the head only,
                     subdivided, with 0.15 mm of noise, in its own scanner frame (mm).
 - ``rig.json``      the view rectangles (split at the mirror panels' inner edges).
@@ -33,7 +36,8 @@ Every property of the rig is an option, so other rigs make stress material
 mirrors' normals at +-L degrees from the optical axis, so the mirror planes sit at 90 - L
 degrees to it), ``--distance MM`` (camera to the head's origin), ``--head-deg RX RY RZ`` (largest
 pitch, yaw and roll of the head motion), ``--tempo T`` (expressions T times as fast and as
-frequent), ``--seed``.
+frequent), ``--seed``. ``--truth-only`` recomputes an existing clip's truth.npz (same options)
+without rendering, to add what a newer version records.
 """
 
 from __future__ import annotations
@@ -65,6 +69,7 @@ FPS = 30
 MIRROR_RADIUS_MM = 120.0          # mirrors tangent to a sphere around the face (fig. 6.4)
 MIRROR_CENTRE_XY = (0.0, 20.0)    # the sphere's centre; its depth is the head's distance - 90 mm
 MARKER_LIFT_MM = 0.5              # how far a dot's centre sits above the skin
+VISIBLE_DEG = 73.0                # a marker is "seen" by a view within this angle of its skin normal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,6 +109,93 @@ def rig_planes(spec: ClipSpec):
     """Mirror 0 (imaged left) then mirror 1, as ``(normal, d)``."""
     return [mirror_plane_from_angles(s * spec.mirror_longitude_deg, 0.0, spec.mirror_centre, MIRROR_RADIUS_MM)
             for s in (-1, 1)]
+
+
+def rendered_triangles(head: HeadModel) -> np.ndarray:
+    """The subject's triangles as rendered: MakeHuman's helper teeth poke through the chin when
+    the jaw opens, so they are left out."""
+    T = head.triangles()
+    return T[np.all(head.skin_mask(("teeth_upper", "teeth_lower"))[T], axis=1)]
+
+
+def view_rectangles(spec: ClipSpec, camera: Camera) -> dict:
+    """RIG.json's views: the image split where the mirror panels' inner edges are imaged."""
+    panels = mirror_panels(spec)
+    b0 = float(np.floor(camera.project(panels[0][[1, 2]])[:, 0].max()))
+    b1 = float(np.ceil(camera.project(panels[1][[1, 2]])[:, 0].min()))
+    w, h = spec.image_size
+    return {"mirror0": [0, 0, b0, h], "direct": [b0, 0, b1, h], "mirror1": [b1, 0, w, h]}
+
+
+def mirror_panels(spec: ClipSpec) -> list:
+    """The two mirror panels' corners ``(4, 3)`` (camera frame, mm): from ~190 mm in front of the
+    point where each plane touches the sphere around the face to ~45 mm behind it; corners 1 and
+    2 are the edge beside the face."""
+    panels = []
+    for n, d in rig_planes(spec):
+        n = np.asarray(n)
+        foot = n * d                                      # closest point of the plane to the origin
+        tangent = np.cross(n, [0.0, 1.0, 0.0])
+        tangent /= np.linalg.norm(tangent)
+        if tangent[2] < 0:
+            tangent = -tangent                            # along the mirror, away from the camera
+        touch = np.asarray(spec.mirror_centre) - n * MIRROR_RADIUS_MM
+        along = (touch - foot) @ tangent
+        s0, s1 = along - 190.0, along + 45.0
+        up = np.array([0.0, 1.0, 0.0])
+        panels.append(np.array([foot + tangent * s + up * h for s, h in ((s0, -150), (s1, -150), (s1, 170), (s0, 170))]))
+    return panels
+
+
+def marker_visibility(spec: ClipSpec, camera: Camera, views: dict, skin_vertices, skin_triangles, centres,
+                      normals, max_deg: float = VISIBLE_DEG) -> np.ndarray:
+    """``(3, M)`` bool for one frame: marker seen in the direct view, mirror 0, mirror 1.
+
+    A marker is seen in a view when its skin faces that view's (real or mirrored) camera within
+    ``max_deg``, its image falls in the view's rectangle (RIG.json), the light path to the camera
+    misses the head (Blender's BVH ray cast: the marker to the mirror and the mirror to the
+    camera) and, in a mirror, the reflection point lies on the panel. Everything in the camera
+    frame, mm."""
+    from mathutils import Vector
+    from mathutils.bvhtree import BVHTree
+
+    bvh = BVHTree.FromPolygons(np.asarray(skin_vertices, float).tolist(), np.asarray(skin_triangles).tolist())
+    P = np.asarray(centres, float)
+    N = np.asarray(normals, float)
+    cos_lim = np.cos(np.radians(max_deg))
+    out = np.zeros((3, len(P)), bool)
+
+    def in_rect(px, rect):                                # RIG.json rectangles: x0, y0, x1, y1
+        x0, y0, x1, y1 = rect
+        return (px[:, 0] >= x0) & (px[:, 0] < x1) & (px[:, 1] >= y0) & (px[:, 1] < y1)
+
+    def clear(a, b) -> bool:                              # the segment a -> b misses the head
+        v = b - a
+        dist = float(np.linalg.norm(v))
+        start = a + v / dist * 0.05
+        hit = bvh.ray_cast(Vector(start), Vector(v / dist), dist - 0.1)
+        return hit[0] is None
+
+    to_cam = -P / np.linalg.norm(P, axis=1, keepdims=True)
+    cand = (np.sum(to_cam * N, axis=1) > cos_lim) & in_rect(camera.project(P), views["direct"])
+    out[0] = [c and clear(p, np.zeros(3)) for c, p in zip(cand, P)]
+    for k, ((n, d), panel) in enumerate(zip(rig_planes(spec), mirror_panels(spec))):
+        n = np.asarray(n)
+        virt = P - 2.0 * (P @ n - d)[:, None] * n           # the marker's mirror image
+        eye = 2.0 * d * n                                 # the mirrored camera centre
+        to_eye = eye - P
+        dist = np.linalg.norm(to_eye, axis=1)
+        to_eye /= dist[:, None]
+        s = (d - P @ n) / (to_eye @ n)                    # where the path meets the mirror
+        hit = P + s[:, None] * to_eye
+        u = panel[1] - panel[0]
+        w = panel[3] - panel[0]
+        a = (hit - panel[0]) @ u / (u @ u)
+        b = (hit - panel[0]) @ w / (w @ w)
+        cand = ((np.sum(to_eye * N, axis=1) > cos_lim) & (s > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
+                & in_rect(camera.project(virt), views[f"mirror{k}"]))
+        out[1 + k] = [c and clear(p, h) and clear(h, np.zeros(3)) for c, p, h in zip(cand, P, hit)]
+    return out
 
 
 def make_scan(head: HeadModel, subject: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -197,10 +289,8 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
             nt.links.new(node.outputs[0], out.inputs["Surface"])
         return mat
 
-    # the subject's head (positions are set per frame); MakeHuman's helper teeth poke through
-    # the chin when the jaw opens, so they are not rendered
-    T = head.triangles()
-    T = T[np.all(head.skin_mask(("teeth_upper", "teeth_lower"))[T], axis=1)]
+    # the subject's head (positions are set per frame)
+    T = rendered_triangles(head)
     mesh = bpy.data.meshes.new("subject")
     mesh.vertices.add(len(subject))
     mesh.loops.add(T.size)
@@ -239,24 +329,10 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     scene.collection.objects.link(markers)
 
     # the mirrors: finite panels beside the cheeks
-    edges = []
-    for k, (n, d) in enumerate(rig_planes(spec)):
-        n = np.asarray(n)
-        foot = n * d                                      # closest point of the plane to the origin
-        tangent = np.cross(n, [0.0, 1.0, 0.0])
-        tangent /= np.linalg.norm(tangent)
-        if tangent[2] < 0:
-            tangent = -tangent                            # along the mirror, away from the camera
-        # the panel runs from ~170 mm in front of the tangent point to ~40 mm behind it
-        touch = np.asarray(spec.mirror_centre) - n * MIRROR_RADIUS_MM
-        along = (touch - foot) @ tangent
-        s0, s1 = along - 190.0, along + 45.0
-        up = np.array([0.0, 1.0, 0.0])
-        corners = np.array([foot + tangent * s + up * h for s, h in ((s0, -150), (s1, -150), (s1, 170), (s0, 170))])
+    for k, corners in enumerate(mirror_panels(spec)):
         pm = bpy.data.meshes.new(f"mirror{k}")
         pm.from_pydata(core_to_blender(corners).tolist(), [], [(0, 1, 2, 3)])
         pm.materials.append(material(f"mirror{k}_glass", glossy=True))
-        edges.append(corners[[1, 2]])                      # the panel's edge beside the face
         mo = bpy.data.objects.new(f"mirror{k}", pm)
         scene.collection.objects.link(mo)
 
@@ -270,7 +346,7 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     lo.rotation_euler = (np.pi / 2 - 0.45, 0.0, 0.0)
     lo.visible_glossy = False                         # no lamp reflection in the mirrors
     scene.collection.objects.link(lo)
-    return scene, skin, markers, unit, edges
+    return scene, skin, markers, unit
 
 
 def main(argv=None) -> int:
@@ -291,6 +367,9 @@ def main(argv=None) -> int:
                     help="largest pitch, yaw, roll of the head motion")
     ap.add_argument("--tempo", type=float, default=ClipSpec.tempo, help="expressions this many times as fast")
     ap.add_argument("--no-scan", action="store_true", help="write no scan.ply / scan_landmarks.json")
+    ap.add_argument("--truth-only", action="store_true",
+                    help="render nothing: recompute the truth of an existing clip made with the same options "
+                         "(checked against its truth.npz) and add what this version records (visibility)")
     args = ap.parse_args(argv)
     spec = ClipSpec(image_size=tuple(args.size), focal_px=args.focal, head_distance_mm=args.distance,
                     mirror_longitude_deg=args.mirror_deg, marker_radius_mm=args.marker_mm / 2,
@@ -314,11 +393,17 @@ def main(argv=None) -> int:
     marker_colors = np.arange(len(verts)) % len(PAINTS)
     rng.shuffle(marker_colors)
 
-    scene, skin, markers, unit, edges = build_scene(bpy, head, subject, marker_colors, spec)
-    scene.cycles.samples = args.samples
-    cache.mkdir(parents=True, exist_ok=True)
-    frames = [args.preview] if args.preview is not None else range(args.frames)
+    camera = Camera.ideal(spec.focal_px, spec.image_size)
+    planes = rig_planes(spec)
+    views = view_rectangles(spec, camera)
+    skin_T = rendered_triangles(head)
+    if not args.truth_only:
+        scene, skin, markers, unit = build_scene(bpy, head, subject, marker_colors, spec)
+        scene.cycles.samples = args.samples
+        cache.mkdir(parents=True, exist_ok=True)
+    frames = [args.preview] if args.preview is not None else [] if args.truth_only else range(args.frames)
     points = np.empty((args.frames, len(verts), 3))
+    visible = np.zeros((args.frames, 3, len(verts)), bool)
     t0 = time.perf_counter()
     for f in range(args.frames):
         q = subject + disp[f]
@@ -326,6 +411,8 @@ def main(argv=None) -> int:
         centre_q = q[verts] + MARKER_LIFT_MM * normals[verts]
         cam_v = q @ R[f].T + t[f]
         points[f] = centre_q @ R[f].T + t[f]
+        if args.preview is None:
+            visible[f] = marker_visibility(spec, camera, views, cam_v, skin_T, points[f], normals[verts] @ R[f].T)
         if f not in frames:
             continue
         png = cache / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"
@@ -343,6 +430,8 @@ def main(argv=None) -> int:
         print(f"frame {done}/{args.frames}  {time.perf_counter() - t0:.0f} s", flush=True)
     if args.preview is not None:
         return 0
+    if args.truth_only:
+        return rewrite_truth(out, points, visible)
 
     # encode the PNGs to H.264 with Blender's FFmpeg through the sequencer
     tmp_dir = out.with_name(out.name + ".tmp")
@@ -362,13 +451,7 @@ def main(argv=None) -> int:
     h264_output(enc.render, tmp_dir / "clip.mp4", "PERC_LOSSLESS", gop_size=FPS)
     with bpy.context.temp_override(scene=enc):
         bpy.ops.render.render(animation=True, scene=enc.name)
-    camera = Camera.ideal(spec.focal_px, spec.image_size)
-    planes = rig_planes(spec)
-    # RIG.json: the views split where the mirror panels' inner edges are imaged
-    b0 = float(np.floor(camera.project(edges[0])[:, 0].max()))
-    b1 = float(np.ceil(camera.project(edges[1])[:, 0].min()))
-    w, h = spec.image_size
-    rig = {"views": {"mirror0": [0, 0, b0, h], "direct": [b0, 0, b1, h], "mirror1": [b1, 0, w, h]}}
+    rig = {"views": views}
     scan_V, scan_T, scan_lms, scan_R, scan_t = make_scan(head, subject, rng)
     buf = __import__("io").BytesIO()
     np.savez_compressed(buf, labels=np.array(labels), points=points.astype(np.float32),
@@ -376,7 +459,7 @@ def main(argv=None) -> int:
                         marker_colors=marker_colors, mirror_normals=np.array([p[0] for p in planes]),
                         mirror_d=np.array([p[1] for p in planes]), fps=np.float64(FPS),
                         subject_vertices=subject.astype(np.float32), performance_seed=np.int64(args.seed),
-                        scan_rotation=scan_R, scan_translation=scan_t)
+                        scan_rotation=scan_R, scan_translation=scan_t, visible=visible)
     info = {"frames": args.frames, "fps": FPS, "markers": len(verts), "samples_per_pixel": args.samples,
             "image_size": list(spec.image_size), "focal_px": spec.focal_px,
             "head_distance_mm": spec.head_distance_mm, "mirror_longitude_deg": spec.mirror_longitude_deg,
@@ -397,6 +480,26 @@ def main(argv=None) -> int:
     shutil.rmtree(tmp_dir, ignore_errors=True)
     size = (out / "clip.mp4").stat().st_size
     print(f"{out / 'clip.mp4'}: {size / 1e6:.2f} MB, {args.frames} frames; truth, scan and camera beside it")
+    return 0
+
+
+def rewrite_truth(out: Path, points, visible) -> int:
+    """``--truth-only``: the existing clip's truth.npz with this version's ``visible`` added,
+    after checking that the same options give the same marker positions."""
+    path = out / "truth.npz"
+    if not path.is_file():
+        raise SystemExit(f"{path}: no such file (render the clip first)")
+    old = dict(np.load(path))
+    err = float(np.max(np.abs(old["points"] - points.astype(np.float32))))
+    if old["points"].shape != points.shape or err > 1e-3:
+        raise SystemExit(f"{path}: these options do not reproduce the clip's markers "
+                         f"(shape {old['points'].shape} vs {points.shape}, max difference {err:.4g} mm)")
+    old["visible"] = visible
+    buf = __import__("io").BytesIO()
+    np.savez_compressed(buf, **old)
+    write_files_atomically({path: buf.getvalue()})
+    seen = visible[:, 0] & (visible[:, 1] | visible[:, 2])
+    print(f"{path}: visibility added; {seen.mean():.1%} of marker-frames seen in the direct view and a mirror")
     return 0
 
 

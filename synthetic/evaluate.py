@@ -13,6 +13,11 @@ scale, so identities are found in the image:
 3. one similarity transform (Umeyama), fitted over every measured marker-frame of the
    clip, brings the take onto the truth; the 3D error is what remains, in truth units (mm).
    Conjectured points are scored separately under the same transform.
+4. completeness: ``split_markers`` counts true markers that carry two or more of the take's
+   labels. With ``seen (F, N)`` (the true marker is seen in the direct view and at least one
+   mirror, e.g. ``truth.npz``'s ``visible``), ``seen_reported_fraction`` is the share of those
+   marker-frames the take reports (measured or conjectured, under the marker's label), and
+   ``never_tracked`` lists the true markers seen in 10 frames or more that no label carries.
 """
 
 from __future__ import annotations
@@ -24,10 +29,10 @@ from ..core.geometry.camera import Camera
 from ..core.geometry.rigid import similarity_fit
 
 
-def score_take(points, truth, camera: Camera, conjectured=None, match_px: float = 2.0) -> dict:
-    """``points (F, M, 3)`` tracked (NaN gaps), ``truth (F, N, 3)`` mm; returns a dict of
-    figures (see the module text) plus ``ids (M,)`` (-1: no true marker) and
-    ``aligned (F, M, 3)``."""
+def score_take(points, truth, camera: Camera, conjectured=None, match_px: float = 2.0, seen=None) -> dict:
+    """``points (F, M, 3)`` tracked (NaN gaps), ``truth (F, N, 3)`` mm, ``seen (F, N)`` optional;
+    returns a dict of figures (see the module text) plus ``ids (M,)`` (-1: no true marker),
+    ``aligned (F, M, 3)`` and ``error_mm (F, M)``."""
     from scipy.spatial import cKDTree
 
     P = np.asarray(points, float)
@@ -42,11 +47,11 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
     near_px = np.full((F, M), np.inf)
     for f in range(F):
         idx = np.flatnonzero(reported[f])
-        seen = np.flatnonzero(np.all(np.isfinite(T[f]), axis=1))
-        if idx.size == 0 or seen.size == 0:
+        present = np.flatnonzero(np.all(np.isfinite(T[f]), axis=1))
+        if idx.size == 0 or present.size == 0:
             continue
-        d, j = cKDTree(camera.project(T[f, seen])).query(camera.project(P[f, idx]))
-        nearest[f, idx], near_px[f, idx] = seen[j], d
+        d, j = cKDTree(camera.project(T[f, present])).query(camera.project(P[f, idx]))
+        nearest[f, idx], near_px[f, idx] = present[j], d
     ids = np.full(M, -1)
     for m in range(M):
         v = nearest[measured[:, m] & (near_px[:, m] <= match_px), m]
@@ -65,7 +70,25 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
     e = err[ok]
     cj = conj & reported & (ids[None, :] >= 0)
     ce = err[cj]
+    N = T.shape[1]
+    labels_per_marker = np.bincount(ids[ids >= 0], minlength=N)
+    completeness = {"split_markers": int(np.count_nonzero(labels_per_marker > 1))}
+    if seen is not None:
+        seen = np.asarray(seen, bool)
+        if seen.shape != (F, N):
+            raise InputError(f"seen {seen.shape} must be (frames, true markers) = {(F, N)}")
+        covered = np.zeros((F, N), bool)             # the true marker reported under one of its labels
+        f_r, m_r = np.nonzero(reported & (ids[None, :] >= 0))
+        covered[f_r, ids[m_r]] = True
+        n_seen = int(seen.sum())
+        completeness.update({
+            "seen_marker_frames": n_seen,
+            "seen_reported_fraction": float((covered & seen).sum() / max(n_seen, 1)),
+            "never_tracked": np.flatnonzero((seen.sum(axis=0) >= 10) & (labels_per_marker == 0)).tolist(),
+            "unreported_seen": seen & ~covered,
+        })
     return {
+        **completeness,
         "markers_tracked": M, "markers_true": int(T.shape[1]), "markers_matched": int(np.count_nonzero(ids >= 0)),
         "identity_switches": switches, "off_marker": off_marker, "measured_marker_frames": int(measured.sum()),
         "reported_fraction": float(reported.mean()),

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
+
+from mirrorcap.core.common.errors import InputError
 
 from mirrorcap.synthetic.evaluate import score_take
 from mirrorcap.synthetic.simulate import face_rig
@@ -25,3 +28,29 @@ def test_switches_count_other_markers_and_off_marker_counts_bad_measurements():
     assert s["markers_matched"] == 60 and (s["ids"] == np.arange(60)).all()
     assert s["measured_marker_frames"] == F * 60 - 1
     assert abs(s["scale_to_mm"] - 1.0) < 1e-3
+
+
+def test_completeness_counts_seen_marker_frames_reported_under_the_markers_labels():
+    """``seen`` (the truth's visibility): the share of seen marker-frames reported, a marker
+    split over two labels, and a marker seen but never tracked."""
+    rig = face_rig(n_markers=40, seed=4)
+    F = 30
+    truth = np.repeat(rig.points[None], F, axis=0)
+    take = truth.copy()
+    seen = np.ones((F, 40), bool)
+    seen[:, 39] = False  # never seen: its gaps do not count
+    take[:, 39] = np.nan
+    take[10:20, 5] = np.nan  # 10 seen frames lost
+    take[:, 7] = np.nan  # marker 7 never tracked, though seen in every frame
+    split = np.full((F, 1, 3), np.nan)
+    split[20:, 0] = truth[20:, 9]  # marker 9's last 10 frames under a second label ...
+    take[20:, 9] = np.nan  # ... and not under its own
+    take = np.concatenate([take, split], axis=1)
+    s = score_take(take, truth, rig.camera, seen=seen)
+    assert s["seen_marker_frames"] == F * 39
+    assert s["seen_reported_fraction"] == pytest.approx(1 - (10 + F) / (F * 39))
+    assert s["split_markers"] == 1
+    assert s["never_tracked"] == [7]
+    assert s["unreported_seen"][10:20, 5].all() and s["unreported_seen"].sum() == 10 + F
+    with pytest.raises(InputError):
+        score_take(take, truth, rig.camera, seen=seen[:, :10])
