@@ -12,6 +12,8 @@ Writes (atomically) into the output folder:
 * ``extraction.json`` -- marker extraction accuracy under faults, speed, memory;
 * ``tracking.json`` -- tracking accuracy and speed from detections;
 * ``track_command.json`` -- the whole ``mirrorcap track`` on a rendered 1280x720 MP4 (speed, accuracy);
+* ``stress_clips.json`` -- the whole ``mirrorcap track`` on each Cycles stress clip of ``sample_scenes/stress``
+  (speed, accuracy, completeness against the truth's visibility);
 * ``animation.json`` -- bake of 1,000 frames, head fit, rig accuracy, PCA error vs modes;
 * ``batch.json`` -- `mirrorcap batch` of 4 sample takes with 1 and 2 workers;
 * ``summary.md`` -- the tables quoted in the README (a skipped part reuses its last JSON).
@@ -35,7 +37,7 @@ from mirrorcap.core.common.files import write_files_atomically
 from .animation import animation_summary, run_animation_benchmark
 from .batch import batch_summary, run_batch_benchmark
 from .extraction import run_extraction_benchmark
-from .tracking import run_track_command_benchmark, run_tracking_benchmark
+from .tracking import run_stress_clip_benchmark, run_track_command_benchmark, run_tracking_benchmark
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
 from .speed import run_speed
 
@@ -209,6 +211,21 @@ def _summary(speed, rows, expected, trials, seconds, ext=None, trk=None) -> str:
     return "\n".join(lines) + "\n"
 
 
+def stress_summary(stress) -> list:
+    lines = ["## Stress clips (Cycles, `make stress-clips`; whole `mirrorcap track`, mirrors self-calibrated)", "",
+             "| clip | frames | markers (true) | RMS / p95 / max | points > 2 mm | identity switches | split labels "
+             "| seen marker-frames reported | never tracked | mirror ratio error | frames/s |",
+             "| --- |" + " --- |" * 10]
+    for name, r in stress.items():
+        seen = r.get("seen_reported_fraction")
+        lines.append(f"| {name} ({r['size'][0]}x{r['size'][1]}) | {r['frames']} | {r['markers']} ({r['markers_true']}) "
+                     f"| {r['rms_mm']:.2f} / {r['p95_mm']:.2f} / {r['max_mm']:.1f} mm | {r['points_over_2mm']} | "
+                     f"{r['identity_switches']} | {r['split_markers']} | "
+                     f"{'-' if seen is None else f'{100 * seen:.1f} %'} | {r.get('never_tracked', '-')} | "
+                     f"{100 * r['mirror_ratio_error']:+.2f} % | {r['frames_per_s']:.0f} |")
+    return lines + [""]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.run", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -278,11 +295,15 @@ def main(argv=None) -> int:
                            "whole `mirrorcap track` on a rendered 1280x720 MP4 ...", run_track_command_benchmark)
     if trk is not None and cmd is not None:
         trk = {**trk, "_command": cmd}
+    stress = measure_or_reuse(args.skip_tracking, "stress_clips.json", "whole `mirrorcap track` on the stress clips ...",
+                              run_stress_clip_benchmark)
     anim = measure_or_reuse(args.skip_animation, "animation.json", "head fit, rig and bake ...",
                             run_animation_benchmark)
     batch = measure_or_reuse(args.skip_batch, "batch.json", "batch bake of 4 takes, 1 and 2 workers ...",
                              run_batch_benchmark)
     summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
+    if stress:
+        summary = summary.rstrip("\n") + "\n\n" + "\n".join(stress_summary(stress)) + "\n"
     if anim is not None:
         summary = summary.rstrip("\n") + "\n" + "\n".join(animation_summary(anim)) + "\n"
     if batch is not None:
