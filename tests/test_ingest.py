@@ -274,37 +274,3 @@ def test_prefetch_yields_the_same_frames_and_propagates_errors(clip, tmp_path):
     next(gen)
     gen.close()
     assert not any(t.name == "mirrorcap-decode" and t.is_alive() for t in threading.enumerate())
-
-
-@pytest.mark.parametrize("source, step", [("clip.mp4", 1), ("clip.mp4", 3), ("png", 2)])
-def test_threaded_detection_yields_the_same_detections_in_order(clip, source, step):
-    """Runs of frames detected by several threads (each decoding its own run, seeking into the
-    video) give exactly what one thread gives, frame by frame and in order; progress counts
-    every frame from the iterating thread; stopping early stops the threads."""
-    import threading
-
-    from mirrorcap.core.capture.detect import DetectionStream
-    from mirrorcap.core.capture.rig import ViewLayout
-
-    root, _ = clip
-    src = open_source(root / source, fps=25)
-    layout = ViewLayout(regions={"mirror0": (0, 0, 420, 720), "direct": (420, 0, 860, 720),
-                                 "mirror1": (860, 0, 1280, 720)})
-    runs = {}
-    for workers in (1, 3):
-        seen = []
-        stream = DetectionStream(src, ColorClasses.default(), layout=layout, settings=None, step=step,
-                                 progress=seen.append, workers=workers)
-        stream.min_run_frames = 1
-        runs[workers] = [(n, d.x.copy(), d.y.copy(), d.color.copy(), v.copy()) for n, d, v in stream]
-        assert seen == list(range(1, len(runs[workers]) + 1))
-    assert [r[0] for r in runs[1]] == list(range(0, N_FRAMES, step))
-    assert len(runs[3]) == len(runs[1])
-    for a, b in zip(runs[1], runs[3]):
-        assert a[0] == b[0] and all(np.array_equal(x, y) for x, y in zip(a[1:], b[1:]))
-    stream = DetectionStream(src, ColorClasses.default(), layout=layout, settings=None, workers=3)
-    stream.min_run_frames = 1
-    it = iter(stream)
-    next(it)
-    it.close()
-    assert not any(t.name.startswith("mirrorcap-detect") for t in threading.enumerate())

@@ -35,7 +35,6 @@ from .video import VideoSource
 
 DETECTION_COLUMNS = ("frame", "view", "x", "y", "color", "area", "intensity")
 LAYOUT_FRAMES = 30  # frames pooled to find the gaps between views
-MAX_DETECT_THREADS = 2  # detection threads of one stream (each decodes and extracts its own run of frames)
 
 
 def format_detection_rows(frame: int, view, x, y, color, area, intensity, view_names=VIEW_NAMES,
@@ -89,128 +88,44 @@ class DetectionStream:
     ``(frame_number, Detections, view (n,))``. Until the view layout is known (from a
     rig file, or from the first ``LAYOUT_FRAMES`` frames' gaps) detections are buffered
     -- detections, never images. ``extract_s`` accumulates the extraction time and
-    ``processed`` the frames read; ``layout`` is set once known.
-
-    With ``workers`` > 1 the frames after the layout frames are split into that many runs,
-    each decoded and extracted by its own thread (OpenCV and numpy release the GIL for
-    the per-pixel work, so the runs share the cores); frames are still yielded in order and
-    ``progress`` is called from the iterating thread. ``None``: one per core, at most
-    ``MAX_DETECT_THREADS``."""
+    ``processed`` the frames read; ``layout`` is set once known."""
 
     def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
                  layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
-                 progress=None, workers: int | None = None):
+                 progress=None):
         self.source, self.colors, self.settings, self.layout = source, colors, settings, layout
         self.start, self.end, self.step = start, end, step
         end_eff = source.frame_count if end is None else min(end, source.frame_count)
-        self.frame_numbers = range(start, end_eff, step)
-        self.total = len(self.frame_numbers)
+        self.total = len(range(start, end_eff, step))
         self.progress = progress
-        self.workers = max(1, min(MAX_DETECT_THREADS, os.cpu_count() or 1) if workers is None else int(workers))
         self.extract_s = 0.0
         self.processed = 0
 
-    min_run_frames = 20  # a thread's run is at least this long (shorter clips: one thread)
-
-    def _done(self, seconds: float):
-        self.extract_s += seconds
-        self.processed += 1
-        if self.progress:
-            self.progress(self.processed)
-
     def __iter__(self):
-        numbers = self.frame_numbers
-        if self.total == 0:
-            next(iter(self.source.frames(self.start, self.end, self.step)), None)  # its error names the range
-            raise InputError(f"no frame could be read from {self.source.path}")
-        head = numbers[:min(LAYOUT_FRAMES, self.total)] if self.layout is None else numbers[:0]
-        rest = numbers[len(head):]
-        pending = []
         extractor = MarkerExtractor(self.colors, self.settings)
-        if len(head):
-            for n, frame in self.source.frames(head.start, head.stop, self.step, prefetch=4):
-                t0 = time.perf_counter()
-                pending.append((n, extractor(frame)))
-                self._done(time.perf_counter() - t0)
-            if not pending:
+        pending = []
+        for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
+            t0 = time.perf_counter()
+            det = extractor(frame)
+            self.extract_s += time.perf_counter() - t0
+            self.processed += 1
+            if self.progress:
+                self.progress(self.processed)
+            if self.layout is None:
+                pending.append((n, det))
+                if len(pending) >= min(LAYOUT_FRAMES, self.total):
+                    self.layout = _layout_from(pending, self.settings, self.source)
+                    for m, d in pending:
+                        yield m, d, self.layout.assign(d.x, d.y)
+                    pending = []
+            else:
+                yield n, det, self.layout.assign(det.x, det.y)
+        if self.layout is None:
+            if self.processed == 0:
                 raise InputError(f"no frame could be read from {self.source.path}")
             self.layout = _layout_from(pending, self.settings, self.source)
             for m, d in pending:
                 yield m, d, self.layout.assign(d.x, d.y)
-            if len(pending) < len(head):  # the source ended early
-                return
-        if not len(rest):
-            return
-        runs = min(self.workers, len(rest) // self.min_run_frames)
-        if runs <= 1:
-            stream = self._extracted(extractor, rest, prefetch=4)
-        else:
-            stream = self._parallel(rest, runs)
-        for n, det in stream:
-            yield n, det, self.layout.assign(det.x, det.y)
-        if self.processed == 0:
-            raise InputError(f"no frame could be read from {self.source.path}")
-
-    def _extracted(self, extractor, numbers: range, prefetch: int):
-        """``(n, Detections)`` over ``numbers`` in this thread."""
-        for n, frame in self.source.frames(numbers.start, numbers.stop, self.step, prefetch=prefetch):
-            t0 = time.perf_counter()
-            det = extractor(frame)
-            self._done(time.perf_counter() - t0)
-            yield n, det
-
-    def _parallel(self, numbers: range, runs: int):
-        """``(n, Detections)`` over ``numbers``, ``runs`` contiguous runs in threads, in order."""
-        import queue
-        import threading
-
-        bounds = np.linspace(0, len(numbers), runs + 1).astype(int)
-        parts = [numbers[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
-        events: queue.Queue = queue.Queue()
-        stop = threading.Event()
-        end = object()
-
-        def work(i, part):
-            try:
-                extractor = MarkerExtractor(self.colors, self.settings)
-                for n, frame in self.source.frames(part.start, part.stop, self.step):
-                    if stop.is_set():
-                        return
-                    t1 = time.perf_counter()
-                    det = extractor(frame)
-                    events.put((i, n, (det, time.perf_counter() - t1)))
-                events.put((i, end, None))
-            except BaseException as exc:  # handed to the iterating thread
-                events.put((i, exc, None))
-
-        threads = [threading.Thread(target=work, args=(i, part), name=f"mirrorcap-detect-{i}", daemon=True)
-                   for i, part in enumerate(parts)]
-        for th in threads:
-            th.start()
-        ready = [[] for _ in parts]
-        finished = [False] * len(parts)
-        current = 0
-        try:
-            while current < len(parts):
-                i, n, det = events.get()
-                if isinstance(n, BaseException):
-                    raise n
-                if n is end:
-                    finished[i] = True
-                else:
-                    ready[i].append((n, det[0]))
-                    self._done(det[1])
-                while current < len(parts):
-                    if ready[current]:
-                        yield from ready[current]
-                        ready[current] = []
-                    if not finished[current]:
-                        break
-                    current += 1
-        finally:
-            stop.set()
-            for th in threads:
-                th.join(timeout=5)
 
 
 def _check_camera(camera: Camera | None, source: VideoSource):
