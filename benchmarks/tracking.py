@@ -8,9 +8,9 @@ Synthetic 300-marker performances (core.simulate.rig_performance: 10 deg head tu
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
-from pathlib import Path
 
 from mirrorcap.synthetic.simulate import face_rig, rig_performance, synthetic_detections
 from mirrorcap.core.track.tracker import track
@@ -132,6 +132,15 @@ def render_performance_mp4(path, n_frames: int, fps: float = 60.0, seed: int = 1
     return rig, pts
 
 
+def _speed(n_frames: int, times, reports) -> dict:
+    """Frames per second (fastest and median of the runs) and the fastest run's stages."""
+    fastest = reports[int(np.argmin(times))]["timings_s"]
+    return {"frames_per_s": n_frames / min(times), "frames_per_s_median": n_frames / float(np.median(times)),
+            "seconds": min(times), "stages_s": {"detect": fastest["detect"], "track": fastest["track"],
+                                                "other": min(times) - fastest["detect"] - fastest["track"]},
+            "track_stages_s": fastest["track_stages"]}
+
+
 def run_track_command_benchmark(n_frames: int = 600, repeats: int = 3, progress=print) -> dict:
     """The whole ``mirrorcap track`` (decode, extraction, mirror self-calibration,
     tracking, C3D and report written) on a rendered 1280x720 MP4 of ``n_frames`` frames,
@@ -155,12 +164,8 @@ def run_track_command_benchmark(n_frames: int = 600, repeats: int = 3, progress=
             times.append(time.perf_counter() - t0)
         take = read_c3d(Path(tmp) / "take.c3d")
         s = score_take(take["points"], truth, rig.camera, conjectured=take["conjectured"])
-    fastest = reports[int(np.argmin(times))]["timings_s"]
     out = {"frames": n_frames, "size": list(rig.camera.image_size), "markers": s["markers_tracked"],
-           "frames_per_s": n_frames / min(times), "frames_per_s_median": n_frames / float(np.median(times)),
-           "seconds": min(times), "stages_s": {"detect": fastest["detect"], "track": fastest["track"],
-                                               "other": min(times) - fastest["detect"] - fastest["track"]},
-           "track_stages_s": fastest["track_stages"], "withheld": int(sum(reports[-1]["per_frame"]["withheld"])),
+           **_speed(n_frames, times, reports), "withheld": int(sum(reports[-1]["per_frame"]["withheld"])),
            **{k: s[k] for k in ("markers_matched", "identity_switches", "measured_marker_frames", "rms_mm", "p95_mm",
                                 "max_mm", "conjectured", "conjectured_rms_mm", "conjectured_max_mm")}}
     progress(f"  whole track, {n_frames} frames 1280x720: {out['frames_per_s']:.0f} frames/s "
@@ -196,12 +201,13 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
         camera = Camera.from_dict(json.loads((clip / "camera.json").read_text()))
         truth = np.load(clip / "truth.npz")
         source = open_source(clip / "clip.mp4")
+        layout = load_rig_views(clip / "rig.json")
         times, reports = [], []
         with tempfile.TemporaryDirectory() as tmp:
             for _ in range(repeats):
                 t0 = time.perf_counter()
                 reports.append(run_track(source, camera, Path(tmp) / "take.c3d", report=Path(tmp) / "take.json",
-                                         layout=load_rig_views(clip / "rig.json")))
+                                         layout=layout))
                 times.append(time.perf_counter() - t0)
             take = read_c3d(Path(tmp) / "take.c3d")
         F = take["points"].shape[0]
@@ -212,15 +218,12 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
         s = score_take(take["points"], truth["points"][:F], camera, conjectured=take["conjectured"], seen=seen)
         report = reports[-1]
         ds = [m["d"] for m in report["mirrors"]]
-        fastest = reports[int(np.argmin(times))]["timings_s"]
+        err = s["error_mm"][:, s["ids"] >= 0]
         r = {"frames": F, "size": list(camera.image_size), "markers_true": s["markers_true"],
-             "markers": s["markers_tracked"], "frames_per_s": F / min(times),
-             "frames_per_s_median": F / float(np.median(times)),
-             "stages_s": {"detect": fastest["detect"], "track": fastest["track"],
-                          "other": min(times) - fastest["detect"] - fastest["track"]},
+             "markers": s["markers_tracked"], **_speed(F, times, reports),
              "mirror_ratio_error": (ds[1] / ds[0]) / (truth["mirror_d"][1] / truth["mirror_d"][0]) - 1.0,
              "mirrors_consistent": report["mirror_agreement"]["consistent"],
-             "points_over_2mm": int(np.count_nonzero(s["error_mm"][np.isfinite(s["error_mm"])] > 2.0)),
+             "points_over_2mm": int(np.count_nonzero(err[np.isfinite(err)] > 2.0)),
              **{k: s[k] for k in ("markers_matched", "identity_switches", "measured_marker_frames", "rms_mm",
                                   "p95_mm", "max_mm", "conjectured", "conjectured_rms_mm", "conjectured_max_mm",
                                   "split_markers")}}

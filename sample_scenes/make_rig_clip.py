@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import io
 import json
 import shutil
 import sys
@@ -62,7 +63,9 @@ from mirrorcap.core.face.head import HeadModel  # noqa: E402
 from mirrorcap.core.face.headfit import subdivide  # noqa: E402
 from mirrorcap.core.face.headio import load_head_npz  # noqa: E402
 from mirrorcap.synthetic.headsim import head_motion, performance, place_markers  # noqa: E402
-from mirrorcap.synthetic.simulate import mirror_plane_from_angles  # noqa: E402
+from mirrorcap.core.capture.rig import ViewLayout  # noqa: E402
+from mirrorcap.core.geometry.mirror import reflect_points  # noqa: E402
+from mirrorcap.synthetic.simulate import mirror_plane_from_angles, visibility  # noqa: E402
 
 OUT = HERE / "rig_clip"
 FPS = 30
@@ -147,54 +150,42 @@ def mirror_panels(spec: ClipSpec) -> list:
     return panels
 
 
-def marker_visibility(spec: ClipSpec, camera: Camera, views: dict, skin_vertices, skin_triangles, centres,
+def marker_visibility(camera: Camera, planes, panels, layout: ViewLayout, skin_vertices, skin_triangles, centres,
                       normals, max_deg: float = VISIBLE_DEG) -> np.ndarray:
     """``(3, M)`` bool for one frame: marker seen in the direct view, mirror 0, mirror 1.
 
     A marker is seen in a view when its skin faces that view's (real or mirrored) camera within
-    ``max_deg``, its image falls in the view's rectangle (RIG.json), the light path to the camera
-    misses the head (Blender's BVH ray cast: the marker to the mirror and the mirror to the
-    camera) and, in a mirror, the reflection point lies on the panel. Everything in the camera
-    frame, mm."""
+    ``max_deg`` (:func:`synthetic.simulate.visibility`), its image falls in the view's rectangle
+    (RIG.json's ``layout``), in a mirror the reflection point lies on the panel (``panels``, from
+    :func:`mirror_panels`), and the light path to the camera misses the head (Blender's BVH ray
+    cast: the marker to the mirror and the mirror to the camera). Camera frame, mm."""
     from mathutils import Vector
     from mathutils.bvhtree import BVHTree
 
     bvh = BVHTree.FromPolygons(np.asarray(skin_vertices, float).tolist(), np.asarray(skin_triangles).tolist())
     P = np.asarray(centres, float)
-    N = np.asarray(normals, float)
-    cos_lim = np.cos(np.radians(max_deg))
-    out = np.zeros((3, len(P)), bool)
-
-    def in_rect(px, rect):                                # RIG.json rectangles: x0, y0, x1, y1
-        x0, y0, x1, y1 = rect
-        return (px[:, 0] >= x0) & (px[:, 0] < x1) & (px[:, 1] >= y0) & (px[:, 1] < y1)
+    out = visibility(camera, planes, P, normals, grazing_deg=max_deg)
 
     def clear(a, b) -> bool:                              # the segment a -> b misses the head
         v = b - a
         dist = float(np.linalg.norm(v))
-        start = a + v / dist * 0.05
-        hit = bvh.ray_cast(Vector(start), Vector(v / dist), dist - 0.1)
-        return hit[0] is None
+        return bvh.ray_cast(Vector(a + v / dist * 0.05), Vector(v / dist), dist - 0.1)[0] is None
 
-    to_cam = -P / np.linalg.norm(P, axis=1, keepdims=True)
-    cand = (np.sum(to_cam * N, axis=1) > cos_lim) & in_rect(camera.project(P), views["direct"])
-    out[0] = [c and clear(p, np.zeros(3)) for c, p in zip(cand, P)]
-    for k, ((n, d), panel) in enumerate(zip(rig_planes(spec), mirror_panels(spec))):
+    origin = np.zeros(3)
+    px = camera.project(P)
+    out[0] &= layout.assign(px[:, 0], px[:, 1]) == 0
+    out[0] = [c and clear(p, origin) for c, p in zip(out[0], P)]
+    for k, ((n, d), panel) in enumerate(zip(planes, panels)):
         n = np.asarray(n)
-        virt = P - 2.0 * (P @ n - d)[:, None] * n           # the marker's mirror image
-        eye = 2.0 * d * n                                 # the mirrored camera centre
-        to_eye = eye - P
-        dist = np.linalg.norm(to_eye, axis=1)
-        to_eye /= dist[:, None]
+        px = camera.project(reflect_points(P, n, d))
+        to_eye = reflect_points(origin, n, d) - P         # towards the mirrored camera centre
         s = (d - P @ n) / (to_eye @ n)                    # where the path meets the mirror
         hit = P + s[:, None] * to_eye
-        u = panel[1] - panel[0]
-        w = panel[3] - panel[0]
-        a = (hit - panel[0]) @ u / (u @ u)
-        b = (hit - panel[0]) @ w / (w @ w)
-        cand = ((np.sum(to_eye * N, axis=1) > cos_lim) & (s > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
-                & in_rect(camera.project(virt), views[f"mirror{k}"]))
-        out[1 + k] = [c and clear(p, h) and clear(h, np.zeros(3)) for c, p, h in zip(cand, P, hit)]
+        u, w = panel[1] - panel[0], panel[3] - panel[0]
+        a, b = (hit - panel[0]) @ u / (u @ u), (hit - panel[0]) @ w / (w @ w)
+        out[1 + k] &= ((s > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
+                       & (layout.assign(px[:, 0], px[:, 1]) == 1 + k))
+        out[1 + k] = [c and clear(p, h) and clear(h, origin) for c, p, h in zip(out[1 + k], P, hit)]
     return out
 
 
@@ -394,8 +385,9 @@ def main(argv=None) -> int:
     rng.shuffle(marker_colors)
 
     camera = Camera.ideal(spec.focal_px, spec.image_size)
-    planes = rig_planes(spec)
+    planes, panels = rig_planes(spec), mirror_panels(spec)
     views = view_rectangles(spec, camera)
+    layout = ViewLayout(regions=views)
     skin_T = rendered_triangles(head)
     if not args.truth_only:
         scene, skin, markers, unit = build_scene(bpy, head, subject, marker_colors, spec)
@@ -412,7 +404,8 @@ def main(argv=None) -> int:
         cam_v = q @ R[f].T + t[f]
         points[f] = centre_q @ R[f].T + t[f]
         if args.preview is None:
-            visible[f] = marker_visibility(spec, camera, views, cam_v, skin_T, points[f], normals[verts] @ R[f].T)
+            visible[f] = marker_visibility(camera, planes, panels, layout, cam_v, skin_T, points[f],
+                                           normals[verts] @ R[f].T)
         if f not in frames:
             continue
         png = cache / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"
@@ -453,13 +446,12 @@ def main(argv=None) -> int:
         bpy.ops.render.render(animation=True, scene=enc.name)
     rig = {"views": views}
     scan_V, scan_T, scan_lms, scan_R, scan_t = make_scan(head, subject, rng)
-    buf = __import__("io").BytesIO()
-    np.savez_compressed(buf, labels=np.array(labels), points=points.astype(np.float32),
-                        pose=np.concatenate([R, t[:, :, None]], axis=2), marker_vertices=verts,
-                        marker_colors=marker_colors, mirror_normals=np.array([p[0] for p in planes]),
-                        mirror_d=np.array([p[1] for p in planes]), fps=np.float64(FPS),
-                        subject_vertices=subject.astype(np.float32), performance_seed=np.int64(args.seed),
-                        scan_rotation=scan_R, scan_translation=scan_t, visible=visible)
+    truth_npz = npz_bytes(labels=np.array(labels), points=points.astype(np.float32),
+                          pose=np.concatenate([R, t[:, :, None]], axis=2), marker_vertices=verts,
+                          marker_colors=marker_colors, mirror_normals=np.array([p[0] for p in planes]),
+                          mirror_d=np.array([p[1] for p in planes]), fps=np.float64(FPS),
+                          subject_vertices=subject.astype(np.float32), performance_seed=np.int64(args.seed),
+                          scan_rotation=scan_R, scan_translation=scan_t, visible=visible)
     info = {"frames": args.frames, "fps": FPS, "markers": len(verts), "samples_per_pixel": args.samples,
             "image_size": list(spec.image_size), "focal_px": spec.focal_px,
             "head_distance_mm": spec.head_distance_mm, "mirror_longitude_deg": spec.mirror_longitude_deg,
@@ -469,7 +461,7 @@ def main(argv=None) -> int:
     files = {
         out / "clip.mp4": (tmp_dir / "clip.mp4").read_bytes(),
         out / "camera.json": json.dumps(camera.to_dict(), indent=2) + "\n",
-        out / "truth.npz": buf.getvalue(),
+        out / "truth.npz": truth_npz,
         out / "clip.json": json.dumps(info, indent=2) + "\n",
         out / "rig.json": json.dumps(rig, indent=2) + "\n",
     }
@@ -481,6 +473,12 @@ def main(argv=None) -> int:
     size = (out / "clip.mp4").stat().st_size
     print(f"{out / 'clip.mp4'}: {size / 1e6:.2f} MB, {args.frames} frames; truth, scan and camera beside it")
     return 0
+
+
+def npz_bytes(**arrays) -> bytes:
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
 
 
 def rewrite_truth(out: Path, points, visible) -> int:
@@ -495,9 +493,7 @@ def rewrite_truth(out: Path, points, visible) -> int:
         raise SystemExit(f"{path}: these options do not reproduce the clip's markers "
                          f"(shape {old['points'].shape} vs {points.shape}, max difference {err:.4g} mm)")
     old["visible"] = visible
-    buf = __import__("io").BytesIO()
-    np.savez_compressed(buf, **old)
-    write_files_atomically({path: buf.getvalue()})
+    write_files_atomically({path: npz_bytes(**old)})
     seen = visible[:, 0] & (visible[:, 1] | visible[:, 2])
     print(f"{path}: visibility added; {seen.mean():.1%} of marker-frames seen in the direct view and a mirror")
     return 0

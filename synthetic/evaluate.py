@@ -89,7 +89,7 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
         })
     return {
         **completeness,
-        "markers_tracked": M, "markers_true": int(T.shape[1]), "markers_matched": int(np.count_nonzero(ids >= 0)),
+        "markers_tracked": M, "markers_true": N, "markers_matched": int(np.count_nonzero(ids >= 0)),
         "identity_switches": switches, "off_marker": off_marker, "measured_marker_frames": int(measured.sum()),
         "reported_fraction": float(reported.mean()),
         "rms_mm": float(np.sqrt(np.mean(e ** 2))), "p95_mm": float(np.percentile(e, 95)), "max_mm": float(e.max()),

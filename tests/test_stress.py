@@ -91,6 +91,7 @@ def test_the_clips_visibility_truth_matches_what_the_detector_finds(tmp_path, ca
 
     from mirrorcap.core.capture.detect import read_detections
     from mirrorcap.core.geometry.camera import Camera
+    from mirrorcap.core.geometry.mirror import reflect_points
 
     code, _, err = _run(["detect", SAMPLE / "clip.mp4", "--frames", "0:40", "--camera", SAMPLE / "camera.json",
                          "--rig", SAMPLE / "rig.json", "-o", tmp_path / "det.csv", "-q"], capsys)
@@ -102,11 +103,7 @@ def test_the_clips_visibility_truth_matches_what_the_detector_finds(tmp_path, ca
     for f in range(40):
         P = truth["points"][f]
         for v in range(3):
-            if v:
-                n, d = truth["mirror_normals"][v - 1], truth["mirror_d"][v - 1]
-                P_v = P - 2.0 * (P @ n - d)[:, None] * n
-            else:
-                P_v = P
+            P_v = reflect_points(P, truth["mirror_normals"][v - 1], truth["mirror_d"][v - 1]) if v else P
             vis = truth["visible"][f, v]
             pick = (det["frame"] == f) & (det["view"] == v)
             dist = cKDTree(np.c_[det["x"][pick], det["y"][pick]]).query(camera.project(P_v[vis]))[0]
