@@ -243,3 +243,77 @@ def demo(args) -> int:
     from ..demo.rig import run_demo
 
     return run_demo(args.out, quiet=args.quiet)
+
+
+def info(args) -> int:
+    from ..core.take.c3d import read_c3d, take_info
+
+    rep = take_info(read_c3d(args.take))
+    if args.json:
+        print(json.dumps(rep, indent=1))
+        return 0
+    units = rep["units"] if rep["source_units"] in (rep["units"], "mm (not given)") else \
+        f"{rep['units']} (the file's {rep['source_units']} converted)"
+    print(f"{args.take}: {rep['frames']} frames at {rep['rate']:g} frames/s (frames {rep['first_frame']}-"
+          f"{rep['last_frame']}), {rep['markers']} markers, {units}, {rep['processor']} processor format")
+    a = rep["analog"]
+    print(f"  analog: {a['channels']} channels at {a['rate']:g} Hz (not used): {', '.join(a['labels'])}"
+          if a["channels"] else "  analog: none")
+    print(f"  gaps: {100 * rep['gap_fraction']:.1f} % of marker-frames")
+    width = max((len(s) for s in rep["labels"]), default=5)
+    for label, n in rep["gaps_per_label"].items():
+        print(f"  {label:<{width}}  {n} gap frames")
+    for r in rep["renamed"]:
+        print(f"  renamed: marker {r['index']} {r['from']!r} -> {r['to']!r} (labels must be unique and non-empty)")
+    return 0
+
+
+def export(args) -> int:
+    from ..core.common.files import write_files_atomically
+    from ..core.take.c3d import points_csv, read_c3d
+
+    take = read_c3d(args.take)
+    write_files_atomically({Path(args.output): points_csv(take)})
+    if not args.quiet:
+        print(f"{take['points'].shape[0]} frames x {len(take['labels'])} markers -> {args.output} [{take['units']}]")
+    return 0
+
+
+def stabilize(args) -> int:
+    import numpy as np
+
+    from ..core.common.files import write_files_atomically
+    from ..core.take.c3d import c3d_bytes, read_c3d
+    from ..core.take.stabilize import stabilize as run
+
+    take = read_c3d(args.take)
+    pivot = args.pivot.strip().lower()
+    if pivot not in ("auto", "none"):
+        try:
+            pivot = [float(v) for v in pivot.split(",")]
+        except ValueError:
+            raise MirrorCapError(f"--pivot must be auto, none or X,Y,Z in mm, not {args.pivot!r}") from None
+        if len(pivot) != 3 or not np.all(np.isfinite(pivot)):
+            raise MirrorCapError(f"--pivot must be auto, none or X,Y,Z in mm, not {args.pivot!r}")
+    elif pivot == "none":
+        pivot = None
+    if not args.smooth >= 0:
+        raise MirrorCapError("--smooth must be 0 or more seconds")
+    st = run(take["points"], take["labels"], rigid=args.rigid, method=args.method, pivot=pivot,
+             rate=take["rate"], smooth_s=args.smooth)
+    report = {"mirrorcap_version": __version__, "take": str(args.take), "units": take["units"],
+              "first_frame": take["first_frame"], "rate": take["rate"], "smooth_s": args.smooth, **st.report()}
+    files = {Path(args.output): c3d_bytes(take["labels"], st.points, take["rate"], units=take["units"],
+                                          first_frame=take["first_frame"] - 1)}
+    if args.report:
+        files[Path(args.report)] = json.dumps(report, indent=1) + "\n"
+    write_files_atomically(files)
+    if not args.quiet:
+        piv = report["pivot_mm"]
+        where = "no pivot" if piv is None else f"pivot ({piv[0]:.1f}, {piv[1]:.1f}, {piv[2]:.1f}) mm [{st.pivot_status}]"
+        print(f"{len(st.labels)} markers over {len(st.points)} frames -> {args.output}: head motion by {st.method} "
+              f"from {', '.join(st.rigid)} ({st.rigid_source}); {where}; rigid residual "
+              f"{report['rigid_residual_rms_mm'] or 0:.3f} mm RMS")
+        for text in st.warnings:
+            print(f"  warning: {text}")
+    return 0

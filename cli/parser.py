@@ -18,6 +18,10 @@ Commands (each documented in the README):
     bind the take to the head, run the face rig on every frame, write the head with shape keys.
 ``mirrorcap batch TAKES... --head HEAD.blend --out DIR [--workers N] [bake options]``
     bake many takes in parallel worker processes (:mod:`.batch`).
+``mirrorcap info TAKE.c3d [--json]`` / ``mirrorcap export TAKE.c3d -o POINTS.csv``
+    what a C3D take holds / its points as ``frame,label,x,y,z`` CSV.
+``mirrorcap stabilize TAKE.c3d -o OUT.c3d [--rigid LABEL ...] [--method invariants|arun] [--pivot auto|none|X,Y,Z]``
+    head motion removed about the rotation pivot (seed 001, eq. 1-9).
 ``mirrorcap demo [--out DIR]`` / ``mirrorcap demo-mirrors [--out DIR]``
     the whole job on the embedded sample clip / the mirror core on the two-mirror sample.
 
@@ -170,8 +174,45 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out", help="folder for the outputs (default out/)")
     demo.add_argument("-q", "--quiet", action="store_true")
     demo.set_defaults(func=commands.demo_mirrors)
+    _take_commands(sub)
     _blender_commands(sub)
     return parser
+
+
+def _take_commands(sub) -> None:
+    """The commands on any C3D take (from `track` or another motion-capture system)."""
+    info = sub.add_parser("info", help="what a C3D take holds: frames, rate, units, labels, gaps, analog channels",
+                          description="Read TAKE.c3d (any vendor's C3D) and print its frames, rate, first frame, "
+                                      "units, labels with their gaps, and analog channels.")
+    info.add_argument("take", help="TAKE.c3d")
+    info.add_argument("--json", action="store_true", help="print the same as JSON")
+    info.set_defaults(func=commands.info)
+
+    exp = sub.add_parser("export", help="a C3D take as CSV: frame,label,x,y,z in mm",
+                         description="Write one row per frame and label, frames numbered as in the file, "
+                                     "coordinates in mm, a gap as empty cells.")
+    exp.add_argument("take", help="TAKE.c3d")
+    exp.add_argument("-o", "--output", required=True, help="POINTS.csv to write")
+    exp.add_argument("-q", "--quiet", action="store_true")
+    exp.set_defaults(func=commands.export)
+
+    stab = sub.add_parser("stabilize", help="remove the head motion from a C3D take (rigid markers, rotation pivot)",
+                          description="Head motion from >= 3 rigid markers (eq. 1-3 of Huang, Lin & Ouhyoung 2000, "
+                                      "or Arun's fit), the rotation pivot (eq. 4-8), and every marker written in the "
+                                      "head frame of the first frame (eq. 9).")
+    stab.add_argument("take", help="TAKE.c3d")
+    stab.add_argument("-o", "--output", required=True, help="OUT.c3d to write (the stabilised take)")
+    stab.add_argument("--rigid", nargs="+", metavar="LABEL",
+                      help="labels of >= 3 markers on a rigid part of the head (default: the 4 that deform least)")
+    stab.add_argument("--method", choices=("invariants", "arun"), default="invariants",
+                      help="invariants: eq. 1-3 from three rigid markers; arun: SVD fit of all (default invariants)")
+    stab.add_argument("--pivot", default="auto",
+                      help="auto (eq. 4-8), none, or X,Y,Z in mm in the take's coordinates (default auto)")
+    stab.add_argument("--smooth", type=float, default=0.2, metavar="SECONDS",
+                      help="smooth the head pose over this window (local quadratic; 0: none; default 0.2)")
+    stab.add_argument("--report", help="R.json to write: pivot_mm, per-frame pose, residuals, warnings")
+    stab.add_argument("-q", "--quiet", action="store_true")
+    stab.set_defaults(func=commands.stabilize)
 
 
 def _blender_commands(sub) -> None:

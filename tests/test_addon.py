@@ -43,8 +43,9 @@ def test_extension_builds_one_zip_per_platform_with_its_wheels(built):
     assert sorted(built) == [f"mirrorcap-0.1.0-{p}.zip" for p in ("linux_x64", "macos_arm64", "macos_x64", "windows_x64")]
     names = zipfile.ZipFile(built["mirrorcap-0.1.0-linux_x64.zip"]).namelist()
     wheels = [n for n in names if n.startswith("wheels/")]
-    assert len(wheels) == 2 and all("manylinux" in w for w in wheels)
+    assert len(wheels) == 3 and all("manylinux" in w for w in wheels)
     assert any(w.startswith("wheels/scipy-") for w in wheels) and any("opencv" in w for w in wheels)
+    assert any(w.startswith("wheels/ezc3d-") for w in wheels)
     assert not any("numpy" in n for n in names)
     assert "sample_scenes/generic_head/head.npz" in names and "core/track/tracker.py" in names
     # the synthetic tools, the demo and the command line stay out of the product
@@ -69,12 +70,19 @@ def test_install_and_enable_like_a_user(built, tmp_path):
         "ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()\n"
         "seen = np.empty(3 * n); ev.vertices.foreach_get('co', seen)\n"
         "shown_mm = float(np.abs(seen - rest).max() * 1000)\n"
+        # the bundled ezc3d (by path: the test's own environment has one too) loads and reads a file
+        "import importlib.util, os, pathlib\n"
+        "site = pathlib.Path(os.environ['BLENDER_USER_RESOURCES'], 'extensions', '.local', 'lib', 'python3.11', 'site-packages')\n"
+        "spec = importlib.util.spec_from_file_location('ezc3d_bundled', site / 'ezc3d' / '__init__.py', "
+        "submodule_search_locations=[str(site / 'ezc3d')])\n"
+        "ez = importlib.util.module_from_spec(spec); sys.modules['ezc3d_bundled'] = ez; spec.loader.exec_module(ez)\n"
+        "c3d_ok = ez.c3d()['header']['points']['size'] == 0\n"
         "values = [kb.value for kb in obj.data.shape_keys.key_blocks[1:]]\n"
         "print('RESULT ' + json.dumps({'install': sorted(r), 'enabled': addon is not None, 'ops': ops,\n"
         "    'panels': panels, 'marker_size': addon.preferences.empty_size_mm if addon else None,\n"
         "    'head': sorted(head), 'vertices': len(obj.data.vertices), 'keys': len(obj.data.shape_keys.key_blocks),\n"
         "    'core_from': mod.__file__, 'scene_settings': hasattr(bpy.context.scene, 'mirrorcap'),\n"
-        "    'shown_off_rest_mm': shown_mm, 'key_values': sorted(set(values))}))\n"
+        "    'shown_off_rest_mm': shown_mm, 'key_values': sorted(set(values)), 'ezc3d': ez.__file__, 'c3d_ok': c3d_ok}))\n"
     )
     res = _run(["-c", code], env={"BLENDER_USER_RESOURCES": str(tmp_path / "user")})
     assert res.returncode == 0, res.stdout + res.stderr
@@ -89,7 +97,8 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     assert str(tmp_path / "user") in out["core_from"]
     assert out["scene_settings"]
     site = tmp_path / "user" / "extensions" / ".local" / "lib" / "python3.11" / "site-packages"
-    assert (site / "scipy").is_dir() and (site / "cv2").is_dir()
+    assert (site / "scipy").is_dir() and (site / "cv2").is_dir() and (site / "ezc3d").is_dir()
+    assert out["c3d_ok"] and str(tmp_path / "user") in out["ezc3d"]   # the bundled ezc3d loads in Blender
 
 
 @pytest.fixture(scope="module")

@@ -47,17 +47,23 @@ def test_round_trip_through_ezc3d(tmp_path):
     assert residual[3, 7] < 0
 
 
-def test_fourth_word_follows_the_specification(tmp_path):
-    """High byte: cameras; low byte: residual in |POINT:SCALE| units; -1: invalid."""
-    pts = np.array([[[100.0, -50.0, 640.0], [np.nan, np.nan, np.nan]]])
-    data = c3d_bytes(["a", "b"], pts, 60.0, residual=np.array([[0.2, 0]]), camera_mask=np.array([[5, 1]]))
+def test_fourth_word_of_a_point(tmp_path):
+    """ezc3d's writer: residual in |POINT:SCALE| units in the high byte, the camera mask in the
+    low byte; -1 and coordinates 0 for a gap; 0 for a conjectured marker."""
+    pts = np.array([[[100.0, -50.0, 640.0], [np.nan, np.nan, np.nan], [1.0, 2.0, 3.0]]])
+    data = c3d_bytes(["a", "b", "c"], pts, 60.0, residual=np.array([[0.2, 0, 0]]),
+                     camera_mask=np.array([[5, 1, 3]]), conjectured=np.array([[False, False, True]]))
+    path = tmp_path / "w.c3d"
+    path.write_bytes(data)
+    scale = ezc3d.c3d(str(path))["parameters"]["POINT"]["SCALE"]["value"][0]
+    assert scale == pytest.approx(-640.0 / 32000, rel=1e-6)
     start = struct.unpack("<H", data[16:18])[0]
-    scale = struct.unpack("<f", data[12:16])[0]
-    assert scale == pytest.approx(-640.0 / 32000)
-    rec = np.frombuffer(data[(start - 1) * 512:(start - 1) * 512 + 32], "<f4")
+    rec = np.frombuffer(data[(start - 1) * 512:(start - 1) * 512 + 48], "<f4")
     word = int(rec[3])
-    assert word >> 8 == 5 and (word & 0xFF) == round(0.2 / abs(scale))
+    assert (word & 0xFF) == 5 and word >> 8 == round(0.2 / abs(scale))
+    assert np.allclose(rec[:3], [100.0, -50.0, 640.0])
     assert rec[7] == -1.0 and np.all(rec[4:7] == 0)
+    assert rec[11] == 0.0 and np.allclose(rec[8:11], [1, 2, 3])
 
 
 def test_bad_takes_are_refused(tmp_path):

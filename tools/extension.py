@@ -54,6 +54,18 @@ WHEELS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "opencv_contrib_python_headless-4.11.0.86-cp37-abi3-macosx_13_0_x86_64.whl": (
         "opencv-contrib-python-headless==4.11.0.86", ("macosx_13_0_x86_64",),
         "ec88044ecb426549b05a8a6187e68051299848c4556ef8cef310621ca8f4316b"),
+    "ezc3d-1.7.2-cp311-cp311-manylinux_2_24_x86_64.manylinux_2_28_x86_64.whl": (
+        "ezc3d==1.7.2", ("manylinux_2_28_x86_64",),
+        "ea7f255a397253ceb1c0367906084d4a53e6f4505770956105e748424bfec3e9"),
+    "ezc3d-1.7.2-cp311-cp311-win_amd64.whl": (
+        "ezc3d==1.7.2", ("win_amd64",),
+        "cbd019a0deb42d0250cb8b984388734e616b69b38975b94318a4b7445de74085"),
+    "ezc3d-1.7.2-cp311-cp311-macosx_11_0_arm64.whl": (
+        "ezc3d==1.7.2", ("macosx_11_0_arm64",),
+        "9c40b2e0a1886e9137dc50ecbf392f70130cbd53b7a24e371360b3f351c10965"),
+    "ezc3d-1.7.2-cp311-cp311-macosx_10_9_x86_64.whl": (
+        "ezc3d==1.7.2", ("macosx_10_9_x86_64",),
+        "0254ac8fac4c2d5855db455eeb7cb8fe9dd5088e7bd1c287fbf65c0f2383dd7e"),
 }
 
 

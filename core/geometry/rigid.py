@@ -59,30 +59,37 @@ def _rigid_fit_batch(A, B, weights):
     return R, cb - (R @ ca[:, :, None])[:, :, 0]
 
 
-def robust_rigid_fit(A, B, iterations: int = 5, weights=None, cauchy_scale: float = CAUCHY_SCALE):
+def robust_rigid_fit(A, B, iterations: int = 5, weights=None, cauchy_scale: float = CAUCHY_SCALE, mask=None):
     """:func:`rigid_fit` iteratively reweighted: markers far from the fit (moving with the
     expression) get small weights ``1 / (1 + (r / c)^2)`` with ``c`` = ``cauchy_scale`` x
     the median residual (default :data:`CAUCHY_SCALE`). ``weights`` start the iteration (e.g. last frame's). For one point
     set returns ``R, t`` and the final weights ``(n,)``; for a batch ``(F, n, 3)`` every frame
-    at once, ``R (F, 3, 3)``, ``t (F, 3)``, weights ``(F, n)``."""
+    at once, ``R (F, 3, 3)``, ``t (F, 3)``, weights ``(F, n)``. ``mask`` (same shape as the
+    weights, bool) leaves points out of every iteration (missing markers)."""
     A = np.asarray(A, float)
     B = np.asarray(B, float)
     batch = B.ndim == 3
     shape = B.shape[:-1]
     w = np.ones(shape) if weights is None else np.broadcast_to(np.asarray(weights, float), shape)
+    if mask is not None:
+        mask = np.broadcast_to(np.asarray(mask, bool), shape)
+        w = w * mask
     half = shape[-1] // 2
     for _ in range(iterations):
         R, t = rigid_fit(A, B, w)
         if batch:
             d = A @ np.swapaxes(R, 1, 2) + t[:, None] - B
             r = np.sqrt(np.einsum("fij,fij->fi", d, d))
-            s = np.partition(r, half, axis=1)[:, half:half + 1]
+            s = (np.partition(r, half, axis=1)[:, half:half + 1] if mask is None
+                 else np.nanmedian(np.where(mask, r, np.nan), axis=1, keepdims=True))
         else:
             d = A @ R.T + t - B
             r = np.sqrt(np.einsum("ij,ij->i", d, d))
-            s = np.partition(r, half)[half]
+            s = np.partition(r, half)[half] if mask is None else np.median(r[mask])
         c = cauchy_scale * s + 2e-6  # robust scale from the median residual (never 0)
         w = 1.0 / (1.0 + (r / c) ** 2)
+        if mask is not None:
+            w = w * mask
     R, t = rigid_fit(A, B, w)
     return R, t, w
 

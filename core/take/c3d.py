@@ -1,31 +1,31 @@
-"""C3D output of a take (the motion-capture interchange format), written with numpy.
+"""C3D, the motion-capture interchange format, read and written with ezc3d.
 
-Layout written (Intel byte order, floating-point data, 512-byte blocks):
+Reading (:func:`read_c3d`) takes any file ezc3d reads: Intel and DEC processor formats
+(a MIPS file is refused with its own message: ezc3d 1.7 does not read it), integer or floating-point data, analog channels (listed, not used), any first
+frame, any ``POINT:UNITS`` (converted to millimetres), labels in ``LABELS``,
+``LABELS2``, ... (duplicates and blanks made unique and reported). A gap is a point
+whose fourth word is negative (ezc3d gives NaN), a NaN, or all three coordinates exactly
+0 (how several writers mark a gap).
 
-* block 1: the header (point count, first/last frame, frame rate, negative scale);
-* blocks 2..: the parameter section -- groups ``POINT`` (``USED``, ``SCALE``, ``RATE``,
-  ``DATA_START``, ``FRAMES``, ``UNITS``, ``LABELS``/``DESCRIPTIONS`` in chunks of 255
-  as ``LABELS2``, ``LABELS3``, ... for larger takes), ``ANALOG`` (none), and
-  ``MIRRORCAP`` (``VERSION``, ``FRAME``: ``camera`` = the OpenCV camera frame);
-* the data section: per frame and point, ``x, y, z`` (float32) and a fourth word
-  holding the residual and the camera mask.
+Writing (:func:`c3d_bytes`, :func:`write_c3d`) is ezc3d's writer, floating-point data:
 
-Point conventions: coordinates in the OpenCV camera frame (x right, y down,
-z forward), millimetres when the take is scaled. The fourth value follows the C3D
-specification for floating-point data: ``-1`` for a gap (the marker was not
-reported that frame; coordinates 0); otherwise, converted to an integer, its high
-byte is the camera mask -- bit 0 the direct view, bit 1 mirror 0, bit 2 mirror 1,
-the views that saw the marker -- and its low byte the residual in units of
-``|POINT:SCALE|`` (at least 1 for a measured point). A *conjectured* marker
-(filled from its neighbours) has the whole word 0, the specification's mark of an
-interpolated point. (Some readers, ezc3d 1.7 among them, swap the two bytes; the
-gap and conjectured marks read the same either way.) ``POINT:SCALE`` is
-``-(largest |coordinate|) / 32000`` as the specification asks.
+* ``POINT:SCALE`` ``-(largest |coordinate|) / 32000`` as the specification asks,
+  ``POINT:UNITS`` ``mm`` (or ``rel`` for an unscaled take), the first frame in the header;
+* the fourth word of each point: ``-1`` and coordinates 0 for a gap; ``0`` for a
+  *conjectured* marker (filled in from its neighbours: no camera, no residual, the
+  specification's mark of an interpolated point); otherwise the residual in units of
+  ``|POINT:SCALE|`` (at least 1) and the camera mask -- bit 0 the direct view, bit 1
+  mirror 0, bit 2 mirror 1. ezc3d 1.7 puts the residual in the high byte and the mask in
+  the low byte (the specification has them the other way round); ezc3d reads its files
+  back as written, and the gap and conjectured marks read the same either way;
+* a group ``MIRRORCAP`` (``VERSION``; ``FRAME`` = the OpenCV camera frame).
 """
 
 from __future__ import annotations
 
 import struct
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
@@ -33,40 +33,30 @@ from ..common.errors import InputError
 from ..common.files import write_files_atomically
 
 BLOCK = 512
-MAX_FRAMES = 65535
+MAX_FRAMES = 2 ** 31 - 1
+
+# POINT:UNITS -> millimetres. "rel" is MirrorCap's own mark of an unscaled take (kept as is).
+UNIT_MM = {"mm": 1.0, "millimeter": 1.0, "millimeters": 1.0, "millimetre": 1.0, "millimetres": 1.0,
+           "cm": 10.0, "dm": 100.0, "m": 1000.0, "meter": 1000.0, "meters": 1000.0, "metre": 1000.0,
+           "metres": 1000.0, "in": 25.4, "inch": 25.4, "inches": 25.4, "ft": 304.8, "rel": 1.0}
+PROCESSORS = {84: "Intel", 85: "DEC", 86: "MIPS"}
 
 
-def _group(name: str, gid: int, desc: str = "") -> bytes:
-    nb, db = name.upper().encode("ascii"), desc.encode("ascii")
-    body = bytes([len(db)]) + db
-    return struct.pack("<bb", len(nb), -gid) + nb + struct.pack("<h", 2 + len(body)) + body
-
-
-def _param(name: str, gid: int, dtype: int, dims, data: bytes, desc: str = "") -> bytes:
-    nb, db = name.upper().encode("ascii"), desc.encode("ascii")
-    if any(not 0 <= d <= 255 for d in dims):
-        raise InputError(f"C3D parameter {name}: a dimension exceeds 255")
-    body = struct.pack("<bb", dtype, len(dims)) + bytes(dims) + data + bytes([len(db)]) + db
-    return struct.pack("<bb", len(nb), gid) + nb + struct.pack("<h", 2 + len(body)) + body
-
-
-def _chars(strings) -> tuple[list, bytes]:
-    width = max(1, max((len(s) for s in strings), default=1))
-    data = b"".join(s.encode("ascii", "replace").ljust(width, b" ") for s in strings)
-    return [width, len(strings)], data
-
-
-def _string_param(name, gid, strings, desc=""):
-    dims, data = _chars(strings)
-    return _param(name, gid, -1, dims, data, desc)
+def _ezc3d():
+    try:
+        import ezc3d
+    except ImportError as exc:  # pragma: no cover - pinned in requirements.txt and bundled in the extension
+        raise InputError("reading and writing C3D needs the ezc3d package (pip install ezc3d==1.7.2)") from exc
+    return ezc3d
 
 
 def c3d_bytes(labels, points, rate: float, units: str = "mm", residual=None, camera_mask=None,
-              conjectured=None, descriptions=None) -> bytes:
-    """The bytes of a C3D file: ``points`` ``(frames, markers, 3)`` with NaN for gaps;
-    ``residual`` ``(frames, markers)`` in ``units`` (default 0); ``camera_mask``
-    ``(frames, markers)`` 0..127 (default 1 = direct view); ``conjectured``
-    ``(frames, markers)`` bool marks filled-in markers."""
+              conjectured=None, descriptions=None, first_frame: int = 0) -> bytes:
+    """The bytes of a C3D file written by ezc3d: ``points`` ``(frames, markers, 3)`` with NaN
+    for gaps; ``residual`` ``(frames, markers)`` in ``units`` (default one scale unit);
+    ``camera_mask`` ``(frames, markers)`` 0..127 (default 1 = direct view); ``conjectured``
+    ``(frames, markers)`` bool marks filled-in markers; ``first_frame`` the number of the
+    first frame (0-based, as ezc3d counts; the header stores it plus 1)."""
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 3 or pts.shape[2] != 3:
         raise InputError("points must have shape (frames, markers, 3)")
@@ -76,68 +66,48 @@ def c3d_bytes(labels, points, rate: float, units: str = "mm", residual=None, cam
         raise InputError(f"{len(labels)} labels for {n_points} markers")
     if len(set(labels)) != len(labels):
         raise InputError("marker labels must be unique")
-    if not 1 <= n_frames <= MAX_FRAMES:
-        raise InputError(f"a C3D take holds 1 to {MAX_FRAMES} frames, got {n_frames}")
+    if n_frames < 1:
+        raise InputError("a C3D take holds at least one frame")
     if not (np.isfinite(rate) and rate > 0):
         raise InputError("the frame rate must be positive")
     gap = ~np.all(np.isfinite(pts), axis=2)
-    res = np.zeros((n_frames, n_points)) if residual is None else np.asarray(residual, float)
     mask = np.ones((n_frames, n_points), int) if camera_mask is None else np.asarray(camera_mask, int)
     conj = np.zeros((n_frames, n_points), bool) if conjectured is None else np.asarray(conjectured, bool)
     if np.any((mask < 0) | (mask > 127)):
         raise InputError("camera masks must be 0..127")
     largest = float(np.max(np.abs(pts[~gap]))) if (~gap).any() else 1.0
     scale = max(largest, 1e-6) / 32000.0
-    res_byte = np.clip(np.round(res / scale), 1, 255).astype(int)  # >= 1: a measured point
-    word = np.where(conj, 0, (mask << 8) | res_byte)
-    fourth = np.where(gap, -1.0, word.astype(np.float64))
-    data = np.concatenate([np.where(gap[..., None], 0.0, pts), fourth[..., None]], axis=2).astype("<f4")
+    res = np.zeros((n_frames, n_points)) if residual is None else np.asarray(residual, float)
+    res_units = np.clip(np.round(res / scale), 1, 255)            # >= 1: a measured point
+    res = np.where(gap, -1.0, np.where(conj, 0.0, res_units * scale))
+    bits = (mask[..., None] >> np.arange(7)) & 1                   # (F, M, 7)
+    cams = (bits.astype(bool) & ~conj[..., None] & ~gap[..., None]).transpose(2, 1, 0)
+    data = np.ones((4, n_points, n_frames))
+    data[:3] = np.where(gap[..., None], 0.0, pts).transpose(2, 1, 0)
     descriptions = [""] * n_points if descriptions is None else [str(d) for d in descriptions]
 
-    def build_params(data_start: int) -> bytes:
-        recs = [_group("POINT", 1, "3D points"),
-                _param("USED", 1, 2, [], struct.pack("<h", n_points)),
-                _param("SCALE", 1, 4, [], struct.pack("<f", -scale)),
-                _param("RATE", 1, 4, [], struct.pack("<f", rate)),
-                _param("DATA_START", 1, 2, [], struct.pack("<H", data_start)),
-                _param("FRAMES", 1, 2, [], struct.pack("<H", n_frames)),
-                _string_param("UNITS", 1, [units])]
-        for chunk in range(0, max(n_points, 1), 255):
-            suffix = "" if chunk == 0 else str(chunk // 255 + 1)
-            recs.append(_string_param("LABELS" + suffix, 1, labels[chunk:chunk + 255] or [""]))
-            recs.append(_string_param("DESCRIPTIONS" + suffix, 1, descriptions[chunk:chunk + 255] or [""]))
-        recs += [_group("ANALOG", 2, "analog data"),
-                 _param("USED", 2, 2, [], struct.pack("<h", 0)),
-                 _param("RATE", 2, 4, [], struct.pack("<f", rate)),
-                 _group("MIRRORCAP", 3, "MirrorCap take"),
-                 _string_param("VERSION", 3, ["0.1.0"]),
-                 _string_param("FRAME", 3, ["camera: OpenCV x right, y down, z forward"])]
-        # the last record's offset is 0: the end of the parameter section
-        last = bytearray(recs[-1])
-        name_len = abs(struct.unpack("<b", last[:1])[0])
-        last[2 + name_len:4 + name_len] = struct.pack("<h", 0)
-        recs[-1] = bytes(last)
-        return b"".join(recs)
-
-    body = build_params(0)
-    n_param_blocks = (4 + len(body) + BLOCK - 1) // BLOCK
-    data_start = 2 + n_param_blocks
-    body = build_params(data_start)
-    params = struct.pack("<BBBB", 1, 0x50, n_param_blocks, 84) + body
-    params = params.ljust(n_param_blocks * BLOCK, b"\0")
-    header = np.zeros(256, "<u2")
-    header[0] = 2 | (0x50 << 8)
-    header[1] = n_points
-    header[2] = 0
-    header[3] = 1
-    header[4] = n_frames
-    header[5] = 10
-    header_bytes = bytearray(header.tobytes())
-    header_bytes[12:16] = struct.pack("<f", -scale)
-    header_bytes[16:18] = struct.pack("<H", data_start)
-    header_bytes[18:20] = struct.pack("<H", 0)
-    header_bytes[20:24] = struct.pack("<f", rate)
-    return bytes(header_bytes) + params + data.tobytes()
+    ezc3d = _ezc3d()
+    c = ezc3d.c3d()
+    point = c["parameters"]["POINT"]
+    point["RATE"]["value"] = [float(rate)]
+    point["UNITS"]["value"] = [units]
+    point["SCALE"]["value"] = [-scale]
+    point["LABELS"]["value"] = labels[:255]
+    point["DESCRIPTIONS"]["value"] = descriptions[:255]
+    for chunk in range(255, n_points, 255):                       # LABELS2, LABELS3, ... past 255
+        suffix = str(chunk // 255 + 1)
+        c.add_parameter("POINT", "LABELS" + suffix, labels[chunk:chunk + 255])
+        c.add_parameter("POINT", "DESCRIPTIONS" + suffix, descriptions[chunk:chunk + 255])
+    c.add_parameter("MIRRORCAP", "VERSION", ["0.1.0"])
+    c.add_parameter("MIRRORCAP", "FRAME", ["camera: OpenCV x right, y down, z forward"])
+    c["header"]["points"]["first_frame"] = int(first_frame)
+    c["data"]["points"] = data
+    c["data"]["meta_points"]["residuals"] = res.T[None]
+    c["data"]["meta_points"]["camera_masks"] = cams
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "take.c3d"
+        c.write(str(out))
+        return out.read_bytes()
 
 
 def write_c3d(path, labels, points, rate: float, **kwargs) -> None:
@@ -145,97 +115,147 @@ def write_c3d(path, labels, points, rate: float, **kwargs) -> None:
     write_files_atomically({path: c3d_bytes(labels, points, rate, **kwargs)})
 
 
-def _parse_parameters(raw: bytes) -> dict:
-    """``{(GROUP, NAME): (dtype, dims, data bytes)}`` from a parameter section (after its 4-byte header)."""
-    groups, params, pos = {}, {}, 0
-    while pos + 4 <= len(raw):
-        n_chars, gid = struct.unpack("<bb", raw[pos:pos + 2])
-        if n_chars == 0:
-            break
-        name = raw[pos + 2:pos + 2 + abs(n_chars)].decode("ascii", "replace").upper()
-        off_pos = pos + 2 + abs(n_chars)
-        offset = struct.unpack("<h", raw[off_pos:off_pos + 2])[0]
-        body = off_pos + 2
-        if gid < 0:
-            groups[-gid] = name
-        else:
-            dtype, nd = struct.unpack("<bb", raw[body:body + 2])
-            dims = list(raw[body + 2:body + 2 + nd])
-            size = abs(dtype) * int(np.prod(dims)) if dims else abs(dtype)
-            start = body + 2 + nd
-            params[(gid, name)] = (dtype, dims, raw[start:start + size])
-        if offset == 0:
-            break
-        pos = off_pos + offset
-    return {(groups.get(g, str(g)), n): v for (g, n), v in params.items()}
+def _check_structure(path: Path, raw: bytes) -> str:
+    """One clear error for a file that is not a complete C3D file (before ezc3d sees it:
+    ezc3d can hang on a file cut inside its parameter section). Returns the processor."""
+    if len(raw) < BLOCK or raw[1] != 0x50 or raw[0] < 2:
+        raise InputError(f"{path} is not a C3D file")
+    pstart = (raw[0] - 1) * BLOCK
+    if pstart + 4 > len(raw):
+        raise InputError(f"{path}: the C3D file is truncated (its parameter section is missing)")
+    processor = raw[pstart + 3]
+    if processor not in PROCESSORS:
+        raise InputError(f"{path} is not a C3D file (unknown processor type {processor})")
+    if pstart + raw[pstart + 2] * BLOCK > len(raw):
+        raise InputError(f"{path}: the C3D file is truncated inside its parameter section")
+    big = processor == 86
+    words = struct.unpack((">" if big else "<") + "10H", raw[:20])
+    n_points, analog_per_frame, first, last, data_start = words[1], words[2], words[3], words[4], words[8]
+    scale_sign = raw[12] if big else (raw[13] if processor == 85 else raw[15])
+    item = 4 if scale_sign & 0x80 else 2
+    n_frames = max(last - first + 1, 0)
+    need = (data_start - 1) * BLOCK + n_frames * (4 * n_points + analog_per_frame) * item
+    if data_start < 2 or need > len(raw):
+        raise InputError(f"{path}: the C3D file is truncated: its header promises {n_frames} frames of "
+                         f"{n_points} markers, the data section holds fewer")
+    return PROCESSORS[processor]
 
 
-def _strings(entry) -> list:
-    dtype, dims, data = entry
-    if dtype != -1:
-        raise InputError("a C3D label parameter is not text")
-    if len(dims) < 2:
-        return [data.decode("ascii", "replace").strip()]
-    w = dims[0]
-    return [data[i * w:(i + 1) * w].decode("ascii", "replace").strip() for i in range(dims[1])]
+def _unique_labels(labels: list) -> tuple[list, list]:
+    """Labels made unique (``NAME``, ``NAME_2``, ...; a blank label becomes ``marker<i>``)
+    and the renames ``[{"index", "from", "to"}]``."""
+    out, renames, seen = [], [], set()
+    for i, raw in enumerate(labels):
+        name = raw.strip() or f"marker{i:03d}"
+        base, k = name, 2
+        while name in seen:
+            name = f"{base}_{k}"
+            k += 1
+        seen.add(name)
+        out.append(name)
+        if name != raw:
+            renames.append({"index": i, "from": raw, "to": name})
+    return out, renames
+
+
+def _parameter(params, group, name, default=None):
+    try:
+        return params[group][name]["value"]
+    except KeyError:
+        return default
 
 
 def read_c3d(path) -> dict:
-    """Read a C3D take (Intel byte order; floating-point or integer point data).
+    """Read any C3D file ezc3d reads.
 
-    Returns ``{"labels", "points" (F, M, 3) with NaN in gaps, "conjectured" (F, M),
-    "rate", "units"}``. Raises :class:`InputError` with one message for anything else.
+    Returns ``{"labels", "points" (F, M, 3) mm (or ``rel``) with NaN in gaps,
+    "conjectured" (F, M) (in a MirrorCap take, residual exactly 0: filled in), "rate", "units"
+    (``mm`` or ``rel``), "source_units" (as in the file), "first_frame" (the number of
+    the first frame as the file counts, 1-based), "processor", "analog" ({"labels",
+    "rate"}), "renamed" (labels made unique), "gaps" (F, M) bool}``. Raises
+    :class:`InputError` with one sentence for anything unreadable.
     """
-    from pathlib import Path
-
     path = Path(path)
     if not path.is_file():
         raise InputError(f"take {path} does not exist")
     raw = path.read_bytes()
-    if len(raw) < 2 * BLOCK or raw[1] != 0x50:
-        raise InputError(f"{path} is not a C3D file")
-    pblock = raw[0]
-    pstart = (pblock - 1) * BLOCK
-    if pstart + 4 > len(raw) or raw[pstart + 3] != 84:
-        raise InputError(f"{path}: only Intel-format C3D files are supported")
-    n_blocks = raw[pstart + 2]
-    params = _parse_parameters(raw[pstart + 4:pstart + n_blocks * BLOCK])
-
-    def number(group, name, fmt):
-        entry = params.get((group, name))
-        if entry is None:
-            raise InputError(f"{path}: the C3D parameter {group}:{name} is missing")
-        return struct.unpack("<" + fmt, entry[2][:struct.calcsize(fmt)])[0]
-
-    n_points = number("POINT", "USED", "h")
-    scale = number("POINT", "SCALE", "f")
-    rate = number("POINT", "RATE", "f")
-    data_start = number("POINT", "DATA_START", "H")
-    n_frames = number("POINT", "FRAMES", "H")
+    processor = _check_structure(path, raw)
+    if processor == "MIPS":
+        raise InputError(f"{path}: a MIPS (big-endian) C3D file, which ezc3d 1.7 does not read; convert it to the "
+                         "Intel or DEC format (e.g. with Motion Lab Systems' C3Deditor) and try again")
+    ezc3d = _ezc3d()
+    try:
+        c = ezc3d.c3d(str(path))
+    except (OSError, ValueError, RuntimeError, IndexError) as exc:
+        raise InputError(f"{path}: not a readable C3D file ({exc})") from None
+    params = c["parameters"]
     labels = []
-    for suffix in [""] + [str(i) for i in range(2, 2 + n_points // 255 + 1)]:
-        if ("POINT", "LABELS" + suffix) in params:
-            labels += _strings(params[("POINT", "LABELS" + suffix)])
-    labels = labels[:n_points]
-    if len(labels) < n_points:
-        labels += [f"marker{i:03d}" for i in range(len(labels), n_points)]
-    units = (_strings(params[("POINT", "UNITS")]) if ("POINT", "UNITS") in params else []) or ["mm"]
-    units = units[0] or "mm"
-    analog_used = number("ANALOG", "USED", "h") if ("ANALOG", "USED") in params else 0
-    if analog_used:
-        raise InputError(f"{path}: C3D files with analog channels are not supported")
-    itemsize = 4 if scale < 0 else 2
-    start = (data_start - 1) * BLOCK
-    count = n_frames * n_points * 4
-    if start + count * itemsize > len(raw):
-        raise InputError(f"{path}: the C3D data section is shorter than {n_frames} frames of {n_points} markers")
-    dtype = "<f4" if scale < 0 else "<i2"
-    data = np.frombuffer(raw, dtype=dtype, count=count, offset=start).astype(np.float64).reshape(n_frames, n_points, 4)
-    if scale > 0:
-        data[..., :3] *= scale
-    fourth = data[..., 3]
-    gap = fourth < 0
-    pts = data[..., :3].copy()
-    pts[gap] = np.nan
-    return {"labels": labels, "points": pts, "conjectured": (fourth == 0) & ~gap, "rate": float(rate),
-            "units": units}
+    for i in range(1, 1000):
+        chunk = _parameter(params, "POINT", "LABELS" if i == 1 else f"LABELS{i}")
+        if chunk is None:
+            break
+        labels += [str(s) for s in chunk]
+    data = np.asarray(c["data"]["points"], float)                 # (4, M, F)
+    n_points = data.shape[1]
+    labels = (labels + [""] * n_points)[:n_points]
+    labels, renamed = _unique_labels(labels)
+    units_list = _parameter(params, "POINT", "UNITS", []) or []
+    source_units = str(units_list[0]).strip() if len(units_list) else ""
+    key = source_units.lower() or "mm"
+    if key not in UNIT_MM:
+        raise InputError(f"{path}: unknown POINT:UNITS {source_units!r} (known: mm, cm, dm, m, in, ft)")
+    pts = data[:3].transpose(2, 1, 0) * UNIT_MM[key]              # (F, M, 3)
+    residual = np.asarray(c["data"]["meta_points"]["residuals"], float)
+    residual = residual[0].T if residual.size else np.zeros(pts.shape[:2])
+    gaps = ~np.all(np.isfinite(pts), axis=2) | np.all(pts == 0.0, axis=2) | (residual < 0)
+    pts[gaps] = np.nan
+    analog_labels = []
+    for i in range(1, 1000):
+        chunk = _parameter(params, "ANALOG", "LABELS" if i == 1 else f"LABELS{i}")
+        if chunk is None:
+            break
+        analog_labels += [str(s).strip() for s in chunk]
+    n_analog = int(np.asarray(c["data"]["analogs"]).shape[1]) if np.asarray(c["data"]["analogs"]).ndim == 3 else 0
+    header = c["header"]
+    # residual exactly 0 marks a conjectured marker in MirrorCap's takes; other writers leave it 0 freely
+    conjectured = (residual == 0) & ~gaps if "MIRRORCAP" in params else np.zeros_like(gaps)
+    return {"labels": labels, "points": pts, "conjectured": conjectured, "gaps": gaps,
+            "rate": float(header["points"]["frame_rate"]), "units": "rel" if key == "rel" else "mm",
+            "source_units": source_units or "mm (not given)", "first_frame": int(header["points"]["first_frame"]) + 1,
+            "processor": processor,
+            "analog": {"labels": analog_labels[:n_analog] if n_analog else [], "channels": n_analog,
+                       "rate": float(header["analogs"]["frame_rate"]) if n_analog else 0.0},
+            "renamed": renamed}
+
+
+def take_info(take: dict) -> dict:
+    """What ``mirrorcap info`` prints for a take read by :func:`read_c3d`."""
+    gaps = take["gaps"]
+    F = gaps.shape[0]
+    return {"frames": int(F), "rate": take["rate"], "first_frame": take["first_frame"],
+            "last_frame": take["first_frame"] + F - 1, "units": take["units"], "source_units": take["source_units"],
+            "processor": take["processor"], "markers": len(take["labels"]),
+            "labels": take["labels"], "gaps_per_label": {lab: int(n) for lab, n in zip(take["labels"], gaps.sum(0))},
+            "gap_fraction": float(gaps.mean()) if gaps.size else 0.0,
+            "analog": take["analog"], "renamed": take["renamed"]}
+
+
+def points_csv(take: dict) -> str:
+    """``frame,label,x,y,z`` per frame and label (mm, or the take's relative units), frames
+    numbered as in the file, a gap as empty cells."""
+    pts = take["points"]
+    F, M = pts.shape[:2]
+    frames = np.repeat(np.arange(F) + take["first_frame"], M)
+    labels = np.tile(np.array([_csv_cell(s) for s in take["labels"]], dtype=object), F)
+    flat = pts.reshape(-1, 3)
+    gap = ~np.all(np.isfinite(flat), axis=1)
+    coords = np.char.mod("%.4f", np.where(gap[:, None], 0.0, flat))
+    xyz = np.char.add(np.char.add(np.char.add(np.char.add(coords[:, 0], ","), coords[:, 1]), ","), coords[:, 2])
+    xyz = np.where(gap, ",,", xyz)
+    head = np.char.add(np.char.add(frames.astype(str), ","), labels.astype(str))
+    rows = np.char.add(np.char.add(head, ","), xyz)
+    return "frame,label,x,y,z\n" + "\n".join(rows.tolist()) + "\n"
+
+
+def _csv_cell(text: str) -> str:
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
