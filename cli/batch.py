@@ -32,7 +32,8 @@ def _bake_one(job):
                        mode=options["mode"], n_modes=options["modes"], neutral_frame=options["neutral_frame"],
                        head_motion=options["head_motion"], settings=settings,
                        report=Path(out_dir) / f"{stem}.bake.json", drop_unseen=options["drop_unseen"],
-                       conjecture_unseen=options.get("conjecture_unseen", False))
+                       conjecture_unseen=options.get("conjecture_unseen", False),
+                       marker_map=options.get("marker_map"))
         out = {"take": str(take), "ok": True, "output": res["output"], "frames": res["frames"]}
     except MirrorCapError as exc:
         out = {"take": str(take), "ok": False, "error": str(exc)}

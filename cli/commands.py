@@ -204,12 +204,14 @@ def bake(args) -> int:
 
     if args.modes < 1:
         raise SystemExit("mirrorcap: error: --modes must be at least 1")
+    if args.blink_interval is not None and not args.blink_interval > 0:
+        raise MirrorCapError("--blink-interval must be a positive number of seconds")
     settings = RigSettings(k=args.k, blinks=not args.no_blinks, blink_seed=args.blink_seed,
                            blink_interval_s=args.blink_interval)
     res = run_bake(args.take, args.head, args.output, object_name=args.object, mode=args.mode, n_modes=args.modes,
                    neutral_frame=args.neutral_frame, head_pose_report=args.head_pose, head_motion=args.head_motion,
                    settings=settings, report=args.report, drop_unseen=args.drop_unseen,
-                   conjecture_unseen=args.conjecture_unseen)
+                   conjecture_unseen=args.conjecture_unseen, marker_map=args.marker_map)
     if not args.quiet:
         line = (f"baked {res['frames']} frames onto {res['object']} ({res['vertices']} vertices) as "
                 f"{'one shape key per frame' if res['mode'] == 'frames' else str(res['modes']) + ' PCA modes'}")
@@ -228,7 +230,7 @@ def batch(args) -> int:
     options = {"object": args.object, "mode": args.mode, "modes": args.modes, "neutral_frame": args.neutral_frame,
                "head_motion": args.head_motion, "no_blinks": args.no_blinks, "blink_seed": args.blink_seed,
                "blink_interval": args.blink_interval, "k": args.k, "drop_unseen": args.drop_unseen,
-               "conjecture_unseen": args.conjecture_unseen}
+               "conjecture_unseen": args.conjecture_unseen, "marker_map": args.marker_map}
     from .batch import run_batch
 
     summary = run_batch(args.takes, args.head, args.out, workers=args.workers, options=options, quiet=args.quiet)

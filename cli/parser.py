@@ -66,7 +66,11 @@ def _bake_options(parser) -> None:
                              "(3 sigma) are left out")
     parser.add_argument("--no-blinks", action="store_true", help="no synthetic eyelid blinks")
     parser.add_argument("--blink-seed", type=int, default=0, help="seed of the blink process (default 0)")
-    parser.add_argument("--blink-interval", type=float, default=2.5, help="mean seconds between blinks (default 2.5)")
+    parser.add_argument("--blink-interval", type=float, default=None,
+                        help="mean seconds between blinks (default 2.5; 4 for a sparse take of <= 40 bound markers)")
+    parser.add_argument("--marker-map", metavar="MAP.json",
+                        help='bind markers by name: {"LABEL": "lm_<name>" | vertex index | "rigid" | "ignore"} '
+                             "(a sparse layout without landmark labels; rigid markers carry the head motion)")
     parser.add_argument("--k", type=float, default=16.0, help="RBF kernel constant k of eq. 7.1 in mm (default 16)")
     parser.add_argument("-q", "--quiet", action="store_true")
 

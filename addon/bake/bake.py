@@ -24,6 +24,7 @@ import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.face.animate import animate_take, head_pose_from_report, unseen_policy
+from ...core.face.bind import load_marker_map
 from ...core.face.facerig import RigSettings
 from ...core.face.shapes import pca_shapes
 from ...core.take.c3d import read_c3d
@@ -129,15 +130,17 @@ def _quaternions(R):
 def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n_modes: int = 8,
              neutral_frame: int = 0, head_pose_report=None, head_motion: bool = False,
              settings: RigSettings | None = None, report=None, progress=None, drop_unseen: bool = False,
-             conjecture_unseen: bool = False) -> dict:
+             conjecture_unseen: bool = False, marker_map=None) -> dict:
     """The whole ``mirrorcap bake``: read, bind, rig, bake, save atomically. Returns the report.
     Markers not seen in the neutral frame: refused, left out (``drop_unseen``) or placed from
-    their neighbours (``conjecture_unseen``, :func:`core.face.bind.bind_take`)."""
+    their neighbours (``conjecture_unseen``, :func:`core.face.bind.bind_take`). ``marker_map``:
+    a MAP.json path (:func:`core.face.bind.load_marker_map`)."""
     if mode not in MODES:
         raise InputError(f"--mode must be one of {', '.join(MODES)}")
     timings = {}
     t0 = time.perf_counter()
     data = read_c3d(take)
+    mapping = load_marker_map(marker_map) if marker_map else None
     F = data["points"].shape[0]
     if mode == "pca" and not 1 <= n_modes <= F:
         raise InputError(f"--modes must be between 1 and the take's {F} frames")
@@ -149,7 +152,8 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
     timings["read_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     anim = animate_take(head, data["labels"], data["points"], data["rate"], neutral_frame=neutral_frame,
-                        head_pose=pose, unseen=unseen_policy(drop_unseen, conjecture_unseen), settings=settings)
+                        head_pose=pose, unseen=unseen_policy(drop_unseen, conjecture_unseen), settings=settings,
+                        marker_map=mapping)
     binding, D = anim.binding, anim.displacements
     timings["rig_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()

@@ -11,7 +11,7 @@ with the figures a bake report carries. Writing them into Blender is the add-on'
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from .facerig import FaceRig, RigSettings
 from .head import HeadModel
 
 UNSEEN_POLICIES = ("error", "drop", "conjecture")
+SPARSE_MARKERS = 40              # a take binding at most this many markers is sparse (a VICON-style layout)
+DENSE_BLINK_INTERVAL_S = 2.5     # Lin 2003, section 7.4
+SPARSE_BLINK_INTERVAL_S = 4.0    # Huang et al. 2000, section 3.2
 
 
 @dataclass
@@ -71,19 +74,29 @@ def unseen_policy(drop_unseen: bool = False, conjecture_unseen: bool = False) ->
 
 
 def animate_take(head: HeadModel, labels, points, rate: float, *, neutral_frame: int = 0, head_pose=None,
-                 unseen: str = "error", settings: RigSettings | None = None, progress=None) -> Animation:
+                 unseen: str = "error", settings: RigSettings | None = None, progress=None,
+                 marker_map: dict | None = None) -> Animation:
     """Bind the take to ``head`` and run the face rig on every frame.
 
     ``head_pose`` ``(F, 3, 4)`` is the tracker's (default: estimated from the markers);
     ``unseen`` says what happens to markers not seen in the neutral frame
-    (:data:`UNSEEN_POLICIES`). ``progress(fraction, text)`` is called between the stages."""
+    (:data:`UNSEEN_POLICIES`); ``marker_map`` binds named markers (:func:`.bind.load_marker_map`).
+    Blinks come every ``settings.blink_interval_s`` on average, by default 2.5 s, or 4 s for a
+    sparse take of at most :data:`SPARSE_MARKERS` bound markers (Huang et al. 2000, section 3.2:
+    "a person's eyes blink once every four seconds"). ``progress(fraction, text)`` is called
+    between the stages."""
     if unseen not in UNSEEN_POLICIES:
         raise InputError(f"unseen must be one of {', '.join(UNSEEN_POLICIES)}")
     timings = {}
     t0 = time.perf_counter()
     if progress:
         progress(0.05, "binding")
-    binding = bind_take(head, labels, points, neutral_frame=neutral_frame, head_pose=head_pose, unseen=unseen)
+    binding = bind_take(head, labels, points, neutral_frame=neutral_frame, head_pose=head_pose, unseen=unseen,
+                        marker_map=marker_map)
+    settings = settings or RigSettings()
+    if settings.blink_interval_s is None:
+        sparse = len(binding.labels) <= SPARSE_MARKERS
+        settings = replace(settings, blink_interval_s=SPARSE_BLINK_INTERVAL_S if sparse else DENSE_BLINK_INTERVAL_S)
     timings["bind_s"] = time.perf_counter() - t0
     if progress:
         progress(0.2, "face rig")

@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..common.errors import InputError
-from ..geometry.rigid import robust_rigid_fit, rotation_zyx, similarity_fit
+from ..common.files import read_json
+from ..geometry.rigid import rigid_fit, robust_rigid_fit, rotation_zyx, similarity_fit
 from ..track.motion import conjecture_gaps, grown_sd, interpolate_in_time, neighbours
 from .head import NOT_SKIN, HeadModel
 from .headfit import subdivide
@@ -168,13 +169,72 @@ class Binding:
     conjectured_neutral: list = field(default_factory=list)  # labels bound from a conjectured neutral position
 
 
+MAP_RIGID, MAP_UNMAPPED = -2, -1
+
+
+def load_marker_map(path) -> dict:
+    """A marker map ``{"LABEL": "lm_<name>" | vertex index | "rigid" | "ignore"}`` from JSON
+    (README: marker maps), checked for form; :func:`resolve_marker_map` checks it against a
+    take and a head."""
+    data = read_json(path, "marker map")
+    if not isinstance(data, dict) or not data:
+        raise InputError(f"{path}: a marker map is a JSON object {{\"LABEL\": \"lm_<name>\" | vertex | \"rigid\" | "
+                         "\"ignore\"}} with at least one entry")
+    for label, role in data.items():
+        ok = (isinstance(role, int) and not isinstance(role, bool) and role >= 0) or \
+             (isinstance(role, str) and (role in ("rigid", "ignore") or role.startswith("lm_")))
+        if not ok:
+            raise InputError(f"{path}: marker {label!r} maps to {role!r}; use \"lm_<name>\", a vertex index (0 or "
+                             "more), \"rigid\" or \"ignore\"")
+    return data
+
+
+def resolve_marker_map(marker_map: dict, labels, head: HeadModel) -> np.ndarray:
+    """Each marker's role as ``(M,)`` ints: its head vertex (>= 0), :data:`MAP_RIGID` (a marker
+    on a rigid part such as a headband: it carries the head motion and is not bound), or
+    :data:`MAP_UNMAPPED`; ``"ignore"`` gives -3 (left out). One message for labels the take
+    does not have, landmarks the head does not have, vertices out of range, or two markers
+    on one vertex."""
+    labels = list(labels)
+    unknown = [k for k in marker_map if k not in labels]
+    if unknown:
+        raise InputError(f"the marker map names {len(unknown)} label(s) the take does not have: "
+                         f"{', '.join(unknown[:5])}{', ...' if len(unknown) > 5 else ''} (`mirrorcap info` lists the take's)")
+    lms = head.landmarks()
+    roles = np.full(len(labels), MAP_UNMAPPED, np.int64)
+    for label, role in marker_map.items():
+        i = labels.index(label)
+        if role == "rigid":
+            roles[i] = MAP_RIGID
+        elif role == "ignore":
+            roles[i] = -3
+        elif isinstance(role, str):
+            if role[3:] not in lms:
+                raise InputError(f"the marker map puts {label!r} on {role!r}, which the head does not have "
+                                 f"(its landmarks: {', '.join('lm_' + n for n in sorted(lms))})")
+            roles[i] = lms[role[3:]]
+        else:
+            if role >= len(head.vertices):
+                raise InputError(f"the marker map puts {label!r} on vertex {role}; the head has "
+                                 f"{len(head.vertices)} vertices (0..{len(head.vertices) - 1})")
+            roles[i] = role
+    vertices, counts = np.unique(roles[roles >= 0], return_counts=True)
+    if (counts > 1).any():
+        raise InputError(f"the marker map puts two markers on vertex {int(vertices[counts > 1][0])}: one marker per vertex")
+    n_rigid = int((roles == MAP_RIGID).sum())
+    if 0 < n_rigid < 3:
+        raise InputError(f"the marker map names {n_rigid} rigid marker(s): head motion needs at least 3 (or none)")
+    return roles
+
+
 def _landmark_of(label: str, landmarks: dict):
     name = label[3:] if label.startswith("lm_") else label
     return name if name in landmarks else None
 
 
 def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose=None,
-              exclude_groups=NOT_SKIN, unseen: str = "error", unseen_limit_mm: float = UNSEEN_LIMIT_MM) -> Binding:
+              exclude_groups=NOT_SKIN, unseen: str = "error", unseen_limit_mm: float = UNSEEN_LIMIT_MM,
+              marker_map: dict | None = None) -> Binding:
     """Register a take ``points (F, M, 3)`` (NaN = gap) to ``head``; see the module text.
     Markers not seen in the neutral frame are an error, or with ``unseen="drop"`` are left
     out (``Binding.dropped``; a tracker's markers first seen later in the take). With
@@ -183,7 +243,9 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     their first sighting) and they are bound like the others (``Binding.conjectured_neutral``);
     one whose conjecture is expected off by more than ``unseen_limit_mm`` (3 sigma: the
     relations' sd grown with the square root of the frames to its first sighting) is left
-    out."""
+    out. ``marker_map`` (:func:`load_marker_map`) binds named markers to given vertices or
+    landmarks (they also anchor the registration), takes the head motion from its
+    ``"rigid"`` markers (then not bound), and leaves out its ``"ignore"`` markers."""
     if unseen not in ("error", "drop", "conjecture"):
         raise ValueError("unseen must be 'error', 'drop' or 'conjecture'")
     from scipy.optimize import linear_sum_assignment
@@ -198,13 +260,19 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         raise InputError(f"{len(labels)} labels for {M} markers")
     if not 0 <= neutral_frame < F:
         raise InputError(f"the neutral frame {neutral_frame} is outside the take's {F} frames")
+    roles = np.full(M, MAP_UNMAPPED, np.int64)
+    if marker_map:
+        roles = resolve_marker_map(marker_map, labels, head)
+        keep = roles != -3
+        p, labels, roles = p[:, keep], [s for s, k in zip(labels, keep) if k], roles[keep]
+        F, M, _ = p.shape
     valid = np.all(np.isfinite(p), axis=2)
     seen = valid[neutral_frame]
     dropped = [labels[i] for i in np.flatnonzero(~seen)]
     if dropped and unseen != "error" and seen.sum() < 3:
         raise InputError(f"only {int(seen.sum())} markers are seen in the neutral frame {neutral_frame}")
     if dropped and unseen == "drop":
-        p, labels, valid = p[:, seen], [s for s, k in zip(labels, seen) if k], valid[:, seen]
+        p, labels, valid, roles = p[:, seen], [s for s, k in zip(labels, seen) if k], valid[:, seen], roles[seen]
         F, M, _ = p.shape
         seen = valid[neutral_frame]
     late = ~seen if unseen == "conjecture" else np.zeros(M, bool)
@@ -218,7 +286,12 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     lms = head.landmarks()
     filled = ~valid
     p = fill_gaps(p)
-    if head_pose is None:
+    rigid = roles == MAP_RIGID
+    if head_pose is None and rigid.any():    # the map's rigid markers carry the head motion
+        if rigid.sum() < 3 or not valid[neutral_frame, rigid].all():
+            raise InputError("the marker map's rigid markers must be at least 3 and all seen in the neutral frame")
+        R, t = rigid_fit(p[neutral_frame, rigid], p[:, rigid])
+    elif head_pose is None:
         R, t = estimate_head_pose(p, neutral_frame)
     else:
         hp = np.asarray(head_pose, float)
@@ -244,14 +317,23 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
             keep = ~late | (expected <= unseen_limit_mm)  # NaN (no related neighbour): left out
             dropped = [labels[i] for i in np.flatnonzero(~keep)]
             conjectured_neutral = [labels[i] for i in np.flatnonzero(late & keep)]
-            q, valid, filled = q[:, keep], valid[:, keep], filled[:, keep]
+            q, valid, filled, roles = q[:, keep], valid[:, keep], filled[:, keep], roles[keep]
             labels = [lab for lab, k in zip(labels, keep) if k]
             M = len(labels)
-    pairs = [(i, _landmark_of(s, lms)) for i, s in enumerate(labels)]
-    pairs = [(i, n) for i, n in pairs if n is not None]
-    if len(pairs) >= 3:
-        idx = np.array([i for i, _ in pairs])
-        target = head.vertices[[lms[n] for _, n in pairs]]
+    if rigid.any():                          # headband markers: the head motion only, not the skin
+        body = roles != MAP_RIGID
+        q, valid, filled, roles = q[:, body], valid[:, body], filled[:, body], roles[body]
+        labels = [lab for lab, k in zip(labels, body) if k]
+        M = len(labels)
+        if M == 0:
+            raise InputError("the marker map leaves no marker to bind: every marker is rigid or ignored")
+    by_label = [lms.get(_landmark_of(s, lms)) if _landmark_of(s, lms) else None for s in labels]
+    anchor = [(i, int(r) if r >= 0 else by_label[i]) for i, r in enumerate(roles)]
+    anchor = [(i, v) for i, v in anchor if v is not None]
+    pairs = [(i, _landmark_of(labels[i], lms) or f"vertex {v}") for i, v in anchor]
+    if len(anchor) >= 3:
+        idx = np.array([i for i, _ in anchor])
+        target = head.vertices[[v for _, v in anchor]]
         pts = q[neutral_frame, idx]
         if np.linalg.matrix_rank(pts - pts.mean(0), tol=1e-6 * max(1.0, np.abs(pts).max())) < 2:
             raise InputError("the take's landmark markers are collinear: the head's placement is undetermined")
@@ -267,19 +349,21 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
                              f"markers ({', '.join('lm_' + n for n in sorted(lms)[:3])}, ...)")
         aligned = s * q @ Rs.T + ts
         registration = "surface"
-    # bind each marker to its nearest allowed vertex, one marker per vertex
-    cand = np.flatnonzero(head.skin_mask(exclude_groups))
-    k = min(8, cand.size)
-    dist, nn = cKDTree(head.vertices[cand]).query(aligned[neutral_frame], k=k)
-    dist, nn = dist.reshape(M, k), nn.reshape(M, k)
-    cols, inv = np.unique(nn, return_inverse=True)
-    cost = np.full((M, cols.size), 1e9)
-    cost[np.repeat(np.arange(M), k), inv.ravel()] = dist.ravel()
-    rows, chosen = linear_sum_assignment(cost)
-    if np.any(cost[rows, chosen] >= 1e9):
-        raise InputError("markers are too crowded to bind one per vertex")
-    vert = np.empty(M, np.int64)
-    vert[rows] = cand[cols[chosen]]
+    # bind each marker to its nearest allowed vertex, one marker per vertex (the map's own vertices first)
+    vert = np.where(roles >= 0, roles, -1)
+    free = np.flatnonzero(vert < 0)
+    cand = np.setdiff1d(np.flatnonzero(head.skin_mask(exclude_groups)), vert[vert >= 0])
+    if free.size:
+        k = min(8, cand.size)
+        dist, nn = cKDTree(head.vertices[cand]).query(aligned[neutral_frame, free], k=k)
+        dist, nn = dist.reshape(free.size, k), nn.reshape(free.size, k)
+        cols, inv = np.unique(nn, return_inverse=True)
+        cost = np.full((free.size, cols.size), 1e9)
+        cost[np.repeat(np.arange(free.size), k), inv.ravel()] = dist.ravel()
+        rows, chosen = linear_sum_assignment(cost)
+        if np.any(cost[rows, chosen] >= 1e9):
+            raise InputError("markers are too crowded to bind one per vertex")
+        vert[free[rows]] = cand[cols[chosen]]
     d = np.linalg.norm(aligned[neutral_frame] - head.vertices[vert], axis=1)
     # the head's motion in the head frame: x -> Rh x + th moves the neutral head onto frame f
     Rh = np.einsum("ij,fjk,lk->fil", Rs, R, Rs)

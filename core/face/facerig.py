@@ -48,7 +48,7 @@ class RigSettings:
     k: float = PAPER_K             # eq. 7.1's kernel constant, mm
     blend_rings: int = 1           # mesh rings over which neighbouring regions blend
     blinks: bool = True
-    blink_interval_s: float = 2.5  # mean time between blinks (Lin 2003, section 7.4)
+    blink_interval_s: float | None = 2.5  # mean time between blinks (Lin 2003, section 7.4); None: by density (animate_take)
     blink_duration_s: float = 0.25
     blink_seed: int = 0
     jaw_stretch_limits: tuple = (0.9, 1.1)
@@ -358,7 +358,8 @@ class FaceRig:
             D[:, self.inner] = H + off - V[self.inner]
         closure = np.zeros(F)
         if self.eyelids:
-            closure = blink_closure(F, fps, self.s.blink_interval_s, self.s.blink_duration_s, self.s.blink_seed)
+            interval = self.s.blink_interval_s if self.s.blink_interval_s is not None else 2.5
+            closure = blink_closure(F, fps, interval, self.s.blink_duration_s, self.s.blink_seed)
             shut = np.flatnonzero(closure > 0)  # blinks: a few frames of the take
             for lid in self.eyelids:
                 idx = lid["vertices"]
