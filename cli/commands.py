@@ -306,7 +306,7 @@ def stabilize(args) -> int:
     report = {"mirrorcap_version": __version__, "take": str(args.take), "units": take["units"],
               "first_frame": take["first_frame"], "rate": take["rate"], "smooth_s": args.smooth, **st.report()}
     files = {Path(args.output): c3d_bytes(take["labels"], st.points, take["rate"], units=take["units"],
-                                          first_frame=take["first_frame"] - 1)}
+                                          first_frame=take["first_frame"] - 1, frame=take["frame"])}
     if args.report:
         files[Path(args.report)] = json.dumps(report, indent=1) + "\n"
     write_files_atomically(files)

@@ -17,6 +17,7 @@ import subprocess
 import sys
 import zipfile
 
+import numpy as np
 import pytest
 
 from conftest import ROOT
@@ -88,7 +89,7 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     assert res.returncode == 0, res.stdout + res.stderr
     out = json.loads(res.stdout.split("RESULT ", 1)[1])
     assert out["install"] == ["FINISHED"] and out["enabled"]
-    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 12
+    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 14
     assert len(out["panels"]) == 5
     assert out["marker_size"] == 2                   # AddonPreferences.bl_idname is the extension's package
     assert out["head"] == ["FINISHED"] and out["vertices"] == 4608 and out["keys"] == 53
@@ -160,3 +161,49 @@ def test_animation_operators(operators_run):
     assert out["bake"] == ["FINISHED"] and out["baked_keys"] == 15
     assert out["import_take"] == ["FINISHED"]
     assert out["scene_frames"] == [1, 15]
+
+
+def test_take_operators_stabilize_and_marker_map(tmp_path):
+    """Import another system's C3D, Stabilize it, edit a marker map by picking empties and vertices,
+    bake with the map (tests/blender/take_ops.py), as a user would in the 3D View."""
+    import ezc3d
+
+    from mirrorcap.core.face.headio import load_head_npz
+    from mirrorcap.core.take.c3d import write_c3d
+    from test_bake import HEAD_NPZ, _sparse_take
+
+    rng = np.random.default_rng(0)
+    F, M = 12, 8
+    pts = rng.normal(0, 100, (F, M, 3)) + [0, 0, 1500]
+    gaps = np.zeros((F, M), bool)
+    gaps[2:5, 5] = True
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["m"]
+    c["parameters"]["POINT"]["LABELS"]["value"] = [f"M{i:02d}" for i in range(M)]
+    data = np.ones((4, M, F))
+    data[:3] = (np.where(gaps[..., None], 0, pts) / 1000).transpose(2, 1, 0)
+    c["data"]["points"] = data
+    c["data"]["meta_points"]["residuals"] = np.where(gaps, -1.0, 0.3).T[None]
+    c["parameters"]["ANALOG"]["RATE"]["value"] = [1000.0]
+    c["parameters"]["ANALOG"]["LABELS"]["value"] = ["Fz"]
+    c["data"]["analogs"] = rng.normal(size=(1, 1, F * 10))
+    c.write(str(tmp_path / "vendor.c3d"))
+    head, keys = load_head_npz(HEAD_NPZ, with_shape_keys=True)
+    labels, sparse, verts, disp, mapping = _sparse_take(head, keys, n_frames=20)
+    write_c3d(tmp_path / "sparse.c3d", labels, sparse, 30.0)
+    (tmp_path / "truth_map.json").write_text(json.dumps(mapping))
+    res = _run([ROOT / "tests" / "blender" / "take_ops.py", tmp_path], timeout=900)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    out = json.loads(res.stdout.split("RESULT ", 1)[1])
+    assert out["import_vendor"] == ["FINISHED"] and out["vendor_frame"] == "lab"
+    assert out["vendor_keys"]["M05"] == F - 3 and out["vendor_keys"]["M00"] == F     # gaps unkeyed
+    assert np.allclose(out["vendor_M05_frame2_m"], pts[1, 5] / 1000, atol=1e-6)       # lab axes, metres
+    assert out["stabilize"] == ["FINISHED"]
+    assert out["stable_files"] == ["stable.c3d", "stable.json"] and len(out["pivot_objects"]) == 1
+    assert out["stabilize_bad"][0] == "ERROR" and "NOSE" in out["stabilize_bad"][1]
+    assert out["stabilize_bad_unchanged"]
+    assert out["map_calls"] == [["FINISHED"]]
+    assert out["map_written"] == mapping
+    assert out["map_two_selected"][0] == "ERROR" and out["map_unchanged"]
+    assert out["bake"] == ["FINISHED"] and out["bake_keys"] == 1 + 52 + 20

@@ -16,6 +16,94 @@ from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
 from ..common.properties import BAKE_MODES
 
 
+def _scene_marker_map(context):
+    """The scene's marker map (MAP.json), or None when none is set."""
+    from ...core.face.bind import load_marker_map
+
+    path = input_path(scene_settings(context).marker_map, what="marker map")
+    return load_marker_map(path) if path is not None else None
+
+
+MAP_ROLES = [("AUTO", "Auto", "the landmark if one is chosen, else the head's selected vertex"),
+             ("VERTEX", "Selected Vertex", "the one vertex selected on the head (Edit Mode)"),
+             ("LANDMARK", "Landmark", "a landmark vertex group (lm_<name>) of the head"),
+             ("RIGID", "Rigid", "a marker on a rigid part (headband): it carries the head motion, not bound"),
+             ("IGNORE", "Ignore", "left out of the bind"),
+             ("REMOVE", "Remove", "take the marker out of the map")]
+
+
+def _landmark_items(self, context):
+    obj = context.scene.mirrorcap.head_object if context and context.scene else None
+    names = sorted(g.name for g in obj.vertex_groups if g.name.startswith("lm_")) if obj is not None else []
+    return [("NONE", "(none)", "")] + [(n, n, "") for n in names]
+
+
+class MIRRORCAP_OT_map_marker(MirrorCapOperator):
+    """Put the selected marker empty in the marker map: on the head's selected vertex, on a landmark, rigid or ignored"""
+
+    bl_idname = "mirrorcap.map_marker"
+    bl_label = "Map Marker"
+
+    label: StringProperty(name="Label", description="the marker's label (default: the selected marker empty's)")
+    role: EnumProperty(name="Role", items=MAP_ROLES, default="AUTO")
+    landmark: EnumProperty(name="Landmark", items=_landmark_items)
+    vertex: IntProperty(name="Vertex", default=-1, min=-1, description="-1: the head's one selected vertex")
+    head_object: StringProperty(name="Head", description="head mesh object (default: the scene's head or the active one)")
+
+    def run(self, context):
+        from pathlib import Path
+
+        from ...core.common.files import read_json, write_files_atomically
+
+        s = scene_settings(context)
+        path = required(input_path(s.marker_map, must_exist=False), "marker map file (MAP.json)")
+        if not Path(path).parent.is_dir():
+            raise InputError(f"the marker map's folder {path.parent} does not exist (save the .blend first for // paths)")
+        labels = [self.label] if self.label else [str(o["mirrorcap_label"]) for o in context.selected_objects
+                                                  if "mirrorcap_label" in o]
+        if len(labels) != 1:
+            raise InputError(f"select one marker empty (an imported take's) or give its label; {len(labels)} selected")
+        label = labels[0]
+        role = self.role
+        if role == "AUTO":
+            role = "LANDMARK" if self.landmark not in ("", "NONE") else "VERTEX"
+        mapping = read_json(path, "marker map") if Path(path).exists() else {}
+        if not isinstance(mapping, dict):
+            raise InputError(f"{path} is not a marker map (a JSON object)")
+        if role == "REMOVE":
+            mapping.pop(label, None)
+            value = "removed"
+        elif role in ("RIGID", "IGNORE"):
+            value = mapping[label] = role.lower()
+        elif role == "LANDMARK":
+            if self.landmark in ("", "NONE"):
+                raise InputError("choose a landmark (the head's lm_<name> vertex groups)")
+            value = mapping[label] = self.landmark
+        else:
+            value = mapping[label] = self._selected_vertex(context)
+        taken = [k for k, v in mapping.items() if k != label and v == value and v not in ("rigid", "ignore")]
+        if taken:
+            raise InputError(f"{value} is already {taken[0]}'s: one marker per vertex")
+        write_files_atomically({path: json.dumps(mapping, indent=1, sort_keys=True) + "\n"})
+        return f"{label}: {value} ({len(mapping)} markers in {path.name})"
+
+    def _selected_vertex(self, context) -> int:
+        import numpy as np
+
+        obj = head_object_from(context, self.head_object)
+        if self.vertex >= 0:
+            if self.vertex >= len(obj.data.vertices):
+                raise InputError(f"{obj.name} has {len(obj.data.vertices)} vertices; vertex {self.vertex} is not one")
+            return int(self.vertex)
+        if obj.mode == "EDIT":
+            obj.update_from_editmode()
+        sel = np.zeros(len(obj.data.vertices), bool)
+        obj.data.vertices.foreach_get("select", sel)
+        if sel.sum() != 1:
+            raise InputError(f"select exactly one vertex of {obj.name} (Edit Mode); {int(sel.sum())} selected")
+        return int(np.flatnonzero(sel)[0])
+
+
 class _UnseenMarkers:
     """The bind and bake operators' options for markers not seen in the neutral frame."""
 
@@ -52,7 +140,7 @@ class MIRRORCAP_OT_bind(_UnseenMarkers, MirrorCapOperator):
         data = read_c3d(required(input_path(self.take, scene_settings(context).take, what="take"), "take (TAKE.c3d)"))
         head = read_head(obj)
         b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame,
-                      unseen=self.unseen())
+                      unseen=self.unseen(), marker_map=_scene_marker_map(context))
         group = obj.vertex_groups.get("mirrorcap_bound") or obj.vertex_groups.new(name="mirrorcap_bound")
         group.remove(list(range(len(obj.data.vertices))))
         group.add([int(v) for v in b.vertices], 1.0, "REPLACE")
@@ -90,14 +178,16 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
         head = read_head(obj)
         head.validate()
         self._obj_name = obj.name
+        mapping = _scene_marker_map(context)
 
         def work(progress):
             from ...core.face.animate import animate_take
             from ...core.face.facerig import RigSettings
 
             anim = animate_take(head, data["labels"], data["points"], data["rate"], neutral_frame=self.neutral_frame,
-                                unseen=self.unseen(), settings=RigSettings(blinks=self.blinks, blink_seed=self.blink_seed),
-                                progress=progress)
+                                unseen=self.unseen(), settings=RigSettings(blinks=self.blinks, blink_seed=self.blink_seed,
+                                                                           blink_interval_s=None),
+                                progress=progress, marker_map=mapping)
             return head, anim.binding, anim.displacements, anim.rate
 
         return work
@@ -115,4 +205,4 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
         return f"baked {out['frames']} frames onto {obj.name}{extra}"
 
 
-OPERATORS = (MIRRORCAP_OT_bind, MIRRORCAP_OT_bake)
+OPERATORS = (MIRRORCAP_OT_bind, MIRRORCAP_OT_bake, MIRRORCAP_OT_map_marker)

@@ -22,6 +22,16 @@ class MIRRORCAP_PT_bake(SidebarPanel, bpy.types.Panel):
         col.prop(s, "blinks")
         op = col.operator("mirrorcap.bake", icon="SHAPEKEY_DATA")
         op.mode, op.modes, op.head_motion, op.blinks = s.bake_mode, s.modes, s.head_motion, s.blinks
+        box = col.box()
+        box.label(text="Marker map (sparse takes: pick a marker empty, then)")
+        box.prop(s, "marker_map")
+        row = box.row(align=True)
+        row.operator("mirrorcap.map_marker", text="Selected Vertex").role = "VERTEX"
+        row.operator_menu_enum("mirrorcap.map_marker", "landmark", text="Landmark")
+        row = box.row(align=True)
+        row.operator("mirrorcap.map_marker", text="Rigid").role = "RIGID"
+        row.operator("mirrorcap.map_marker", text="Ignore").role = "IGNORE"
+        row.operator("mirrorcap.map_marker", text="Remove").role = "REMOVE"
         col.label(text="Retargeting: coming next", icon="INFO")
 
 

@@ -60,6 +60,14 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     modes: IntProperty(name="Modes", default=8, min=1, max=512, description="number of PCA modes")
     head_motion: BoolProperty(name="Head Motion", default=False, description="key the head motion on the object")
     blinks: BoolProperty(name="Blinks", default=True, description="synthetic eyelid blinks (no eyelid markers)")
+    stable_take: StringProperty(name="Stabilised Take", subtype="FILE_PATH", default="//take_stable.c3d",
+                                description="OUT.c3d that Stabilize writes (the take in the head frame of its first frame)")
+    rigid_labels: StringProperty(name="Rigid Labels", default="",
+                                 description="labels of >= 3 rigid (headband) markers, space-separated; empty: the "
+                                             "selected marker empties, or the markers that deform least")
+    marker_map: StringProperty(name="Marker Map", subtype="FILE_PATH", default="",
+                               description="MAP.json binding markers by name (LABEL: lm_<name> | vertex | rigid | "
+                                           "ignore); the map buttons below write it")
 
 
 class MirrorCapPreferences(bpy.types.AddonPreferences):

@@ -1,8 +1,9 @@
 """A C3D take in the scene: one empty per marker under a parent empty, animated.
 
 The parent carries the unit conversion (a take in mm, or in the relative units of a
-self-calibrated take, is shown at 1 unit = 1 mm) and the camera-to-Blender frame change of
-:mod:`.frames`; each marker's location is keyed on the frames it was reported (gaps stay
+self-calibrated take, is shown at 1 unit = 1 mm) and, for a MirrorCap take in the camera
+frame, the camera-to-Blender frame change of :mod:`.frames` (another system's take keeps its
+own axes: most are Z-up, as Blender is); each marker's location is keyed on the frames it was reported (gaps stay
 gaps), three F-curves per marker, each written with one ``keyframe_points.foreach_set``.
 Scene frame ``1 + f`` is take frame ``f``.
 """
@@ -19,9 +20,9 @@ from .frames import core_to_blender
 from .properties import preferences
 
 
-def import_take(context, path, name: str | None = None):
-    """Add the take at ``path``; returns the parent empty."""
-    data = read_c3d(path)
+def import_take(context, path, name: str | None = None, data: dict | None = None):
+    """Add the take at ``path`` (or ``data`` as :func:`read_c3d` returns it); returns the parent empty."""
+    data = read_c3d(path) if data is None else data
     P = data["points"]                          # (F, M, 3) core frame
     F, M, _ = P.shape
     name = name or Path(path).stem
@@ -35,7 +36,11 @@ def import_take(context, path, name: str | None = None):
     coll.objects.link(parent)
     prefs = preferences(context)
     size = 0.001 * (prefs.empty_size_mm if prefs is not None else 2)
-    B = core_to_blender(np.nan_to_num(P)).reshape(F, M, 3)      # metres at 1 unit = 1 mm
+    if data["frame"] == "camera":
+        B = core_to_blender(np.nan_to_num(P)).reshape(F, M, 3)  # metres at 1 unit = 1 mm
+    else:
+        B = 0.001 * np.nan_to_num(P)                            # the lab's own axes, metres
+    parent["mirrorcap_frame"] = data["frame"]
     seen = np.all(np.isfinite(P), axis=2)
     frames = np.arange(F, dtype=np.float32) + 1.0
     for m, label in enumerate(data["labels"]):
@@ -43,6 +48,7 @@ def import_take(context, path, name: str | None = None):
         ob.empty_display_type = "SPHERE"
         ob.empty_display_size = size
         ob.parent = parent
+        ob["mirrorcap_label"] = label
         coll.objects.link(ob)
         ok = seen[:, m]
         if not ok.any():

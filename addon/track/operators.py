@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ...core.common.errors import InputError
 from ..common.inputs import input_path, required, rig_and_colours, rigid_from_settings, scene_settings, take_report_path
@@ -167,4 +167,75 @@ class MIRRORCAP_OT_import_take(MirrorCapOperator):
         return f"imported {len(parent.children)} markers from {path.name}"
 
 
-OPERATORS = (MIRRORCAP_OT_rigid_from_tracks, MIRRORCAP_OT_track, MIRRORCAP_OT_track_clip_tracks, MIRRORCAP_OT_import_take)
+STABILIZE_METHODS = [("invariants", "Invariants", "eq. 1-3 of Huang, Lin & Ouhyoung 2000 from three rigid markers"),
+                     ("arun", "Arun", "SVD fit of every rigid marker")]
+PIVOT_MODES = [("auto", "Auto", "estimate the rotation pivot (eq. 4-8)"), ("none", "None", "no pivot")]
+
+
+def _selected_marker_labels(context) -> list:
+    """The labels of the selected marker empties (``mirrorcap_label``), active one last."""
+    objs = [o for o in context.selected_objects if "mirrorcap_label" in o]
+    return [str(o["mirrorcap_label"]) for o in objs]
+
+
+class MIRRORCAP_OT_stabilize_take(MirrorCapOperator):
+    """Remove the head motion from a C3D take (any system's): rigid markers, rotation pivot, every marker in the head frame of the first frame"""
+
+    bl_idname = "mirrorcap.stabilize_take"
+    bl_label = "Stabilize Take"
+
+    filepath: StringProperty(name="Take", subtype="FILE_PATH", description="TAKE.c3d (default: the scene's)")
+    output: StringProperty(name="Output", subtype="FILE_PATH", description="OUT.c3d (default: the scene's)")
+    rigid: StringProperty(name="Rigid Labels", description="space-separated; default: the scene's, the selected "
+                                                           "marker empties, or automatic")
+    method: EnumProperty(name="Method", items=STABILIZE_METHODS, default="invariants")
+    pivot: EnumProperty(name="Pivot", items=PIVOT_MODES, default="auto")
+    smooth_s: FloatProperty(name="Smoothing (s)", default=0.2, min=0.0, soft_max=1.0,
+                            description="head pose smoothed by a local quadratic over this window (0: none)")
+    import_result: BoolProperty(name="Import", default=True, description="add the stabilised take and its pivot")
+
+    def run(self, context):
+        import json
+
+        from ...core.common.files import write_files_atomically
+        from ...core.take.c3d import c3d_bytes, read_c3d
+        from ...core.take.stabilize import stabilize
+        from ..common.take_io import import_take
+
+        s = scene_settings(context)
+        src = required(input_path(self.filepath, s.take, what="take"), "take (TAKE.c3d)")
+        out = required(input_path(self.output, s.stable_take, must_exist=False), "output take (OUT.c3d)")
+        if not out.parent.is_dir():
+            raise InputError(f"the output's folder {out.parent} does not exist (save the .blend first for // paths)")
+        labels = (self.rigid or s.rigid_labels).replace(",", " ").split() or _selected_marker_labels(context) or None
+        take = read_c3d(src)
+        st = stabilize(take["points"], take["labels"], rigid=labels, method=self.method,
+                       pivot="auto" if self.pivot == "auto" else None, rate=take["rate"], smooth_s=self.smooth_s)
+        report = {"take": str(src), "units": take["units"], "first_frame": take["first_frame"], "rate": take["rate"],
+                  "smooth_s": self.smooth_s, **st.report()}
+        write_files_atomically({
+            out: c3d_bytes(take["labels"], st.points, take["rate"], units=take["units"],
+                           first_frame=take["first_frame"] - 1, frame=take["frame"]),
+            out.with_suffix(".json"): json.dumps(report, indent=1) + "\n"})
+        if self.import_result:
+            stable = dict(take, points=st.points, gaps=~np.all(np.isfinite(st.points), axis=2))
+            parent = import_take(context, out, data=stable)
+            if st.pivot_mm is not None:
+                from ..common.frames import core_to_blender
+
+                pivot = bpy.data.objects.new(f"{parent.name} pivot", None)
+                pivot.empty_display_type = "PLAIN_AXES"
+                pivot.empty_display_size = 0.03
+                pivot.parent = parent
+                pivot.location = (core_to_blender(st.pivot_mm) if take["frame"] == "camera" else 0.001 * st.pivot_mm)
+                pivot["mirrorcap_pivot_mm"] = [float(v) for v in st.pivot_mm]
+                parent.users_collection[0].objects.link(pivot)
+        where = "no pivot" if st.pivot_mm is None else f"pivot {st.pivot_status}"
+        for text in st.warnings:
+            self.report({"WARNING"}, text)
+        return (f"stabilised {len(st.labels)} markers by {st.method} from {', '.join(st.rigid)} ({where}) "
+                f"-> {out.name}")
+
+
+OPERATORS = (MIRRORCAP_OT_rigid_from_tracks, MIRRORCAP_OT_track, MIRRORCAP_OT_track_clip_tracks, MIRRORCAP_OT_import_take,
+             MIRRORCAP_OT_stabilize_take)

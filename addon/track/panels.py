@@ -38,6 +38,11 @@ class MIRRORCAP_PT_take(SidebarPanel, bpy.types.Panel):
         col = self.layout.column()
         col.prop(s, "take")
         col.operator("mirrorcap.import_take", icon="EMPTY_DATA")
+        box = col.box()
+        box.label(text="Stabilize (any system's C3D)")
+        box.prop(s, "stable_take")
+        box.prop(s, "rigid_labels")
+        box.operator("mirrorcap.stabilize_take", icon="ORIENTATION_GIMBAL")
 
 
 PANELS = (MIRRORCAP_PT_track, MIRRORCAP_PT_take)

@@ -18,7 +18,8 @@ Writing (:func:`c3d_bytes`, :func:`write_c3d`) is ezc3d's writer, floating-point
   mirror 0, bit 2 mirror 1. ezc3d 1.7 puts the residual in the high byte and the mask in
   the low byte (the specification has them the other way round); ezc3d reads its files
   back as written, and the gap and conjectured marks read the same either way;
-* a group ``MIRRORCAP`` (``VERSION``; ``FRAME`` = the OpenCV camera frame).
+* a group ``MIRRORCAP`` (``VERSION``; ``FRAME``: ``camera: ...`` for the OpenCV camera frame
+  of a tracked take, ``lab: ...`` for another system's axes, e.g. a stabilised vendor take).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ UNIT_MM = {"mm": 1.0, "millimeter": 1.0, "millimeters": 1.0, "millimetre": 1.0, 
            "cm": 10.0, "dm": 100.0, "m": 1000.0, "meter": 1000.0, "meters": 1000.0, "metre": 1000.0,
            "metres": 1000.0, "in": 25.4, "inch": 25.4, "inches": 25.4, "ft": 304.8, "rel": 1.0}
 PROCESSORS = {84: "Intel", 85: "DEC", 86: "MIPS"}
+FRAMES = {"camera": "camera: OpenCV x right, y down, z forward", "lab": "lab: the capture system's own axes"}
 
 
 def _ezc3d():
@@ -51,12 +53,16 @@ def _ezc3d():
 
 
 def c3d_bytes(labels, points, rate: float, units: str = "mm", residual=None, camera_mask=None,
-              conjectured=None, descriptions=None, first_frame: int = 0) -> bytes:
+              conjectured=None, descriptions=None, first_frame: int = 0, frame: str = "camera") -> bytes:
     """The bytes of a C3D file written by ezc3d: ``points`` ``(frames, markers, 3)`` with NaN
     for gaps; ``residual`` ``(frames, markers)`` in ``units`` (default one scale unit);
     ``camera_mask`` ``(frames, markers)`` 0..127 (default 1 = direct view); ``conjectured``
     ``(frames, markers)`` bool marks filled-in markers; ``first_frame`` the number of the
-    first frame (0-based, as ezc3d counts; the header stores it plus 1)."""
+    first frame (0-based, as ezc3d counts; the header stores it plus 1); ``frame``: the
+    coordinates' axes, ``"camera"`` (the OpenCV camera frame of a MirrorCap take) or ``"lab"``
+    (another system's, kept as they came)."""
+    if frame not in FRAMES:
+        raise InputError(f"frame must be one of {', '.join(FRAMES)}")
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 3 or pts.shape[2] != 3:
         raise InputError("points must have shape (frames, markers, 3)")
@@ -99,7 +105,7 @@ def c3d_bytes(labels, points, rate: float, units: str = "mm", residual=None, cam
         c.add_parameter("POINT", "LABELS" + suffix, labels[chunk:chunk + 255])
         c.add_parameter("POINT", "DESCRIPTIONS" + suffix, descriptions[chunk:chunk + 255])
     c.add_parameter("MIRRORCAP", "VERSION", ["0.1.0"])
-    c.add_parameter("MIRRORCAP", "FRAME", ["camera: OpenCV x right, y down, z forward"])
+    c.add_parameter("MIRRORCAP", "FRAME", [FRAMES[frame]])
     c["header"]["points"]["first_frame"] = int(first_frame)
     c["data"]["points"] = data
     c["data"]["meta_points"]["residuals"] = res.T[None]
@@ -172,7 +178,8 @@ def read_c3d(path) -> dict:
     "conjectured" (F, M) (in a MirrorCap take, residual exactly 0: filled in), "rate", "units"
     (``mm`` or ``rel``), "source_units" (as in the file), "first_frame" (the number of
     the first frame as the file counts, 1-based), "processor", "analog" ({"labels",
-    "rate"}), "renamed" (labels made unique), "gaps" (F, M) bool}``. Raises
+    "rate"}), "renamed" (labels made unique), "gaps" (F, M) bool, "frame" (``"camera"`` for
+    a MirrorCap take in the camera frame, else ``"lab"``)}``. Raises
     :class:`InputError` with one sentence for anything unreadable.
     """
     path = Path(path)
@@ -219,7 +226,10 @@ def read_c3d(path) -> dict:
     header = c["header"]
     # residual exactly 0 marks a conjectured marker in MirrorCap's takes; other writers leave it 0 freely
     conjectured = (residual == 0) & ~gaps if "MIRRORCAP" in params else np.zeros_like(gaps)
-    return {"labels": labels, "points": pts, "conjectured": conjectured, "gaps": gaps,
+    frame_text = _parameter(params, "MIRRORCAP", "FRAME", [""])
+    frame = "camera" if "MIRRORCAP" in params and str(frame_text[0] if len(frame_text) else "").startswith("camera") \
+        else "lab"
+    return {"labels": labels, "points": pts, "conjectured": conjectured, "gaps": gaps, "frame": frame,
             "rate": float(header["points"]["frame_rate"]), "units": "rel" if key == "rel" else "mm",
             "source_units": source_units or "mm (not given)", "first_frame": int(header["points"]["first_frame"]) + 1,
             "processor": processor,

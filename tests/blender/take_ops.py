@@ -1,0 +1,102 @@
+"""Drive the take operators headless (import any system's C3D, Stabilize, the marker-map
+editor, Bake with a map) and print what happened as JSON (tests/test_addon.py asserts on it).
+
+    python tests/blender/take_ops.py WORK_DIR
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+import mirrorcap
+
+work = Path(sys.argv[1])
+out = {}
+bpy.ops.wm.read_factory_settings(use_empty=True)
+mirrorcap.register()
+scene = bpy.context.scene
+s = scene.mirrorcap
+
+
+def call(op, **kw):
+    try:
+        return sorted(op(**kw))
+    except RuntimeError as exc:               # an operator's ERROR report
+        return ["ERROR", str(exc).strip().splitlines()[-1]]
+
+
+def fcurves(action):
+    return [fc for layer in action.layers for strip in layer.strips for bag in strip.channelbags for fc in bag.fcurves]
+
+
+# 1. another system's C3D (lab axes, metres, analog channels, gaps): empties keyed where seen
+out["import_vendor"] = call(bpy.ops.mirrorcap.import_take, filepath=str(work / "vendor.c3d"))
+parent = [o for o in bpy.data.objects if o.get("mirrorcap_take", "").endswith("vendor.c3d")][0]
+out["vendor_frame"] = parent["mirrorcap_frame"]
+out["vendor_keys"] = {o["mirrorcap_label"]: len(fcurves(o.animation_data.action)[0].keyframe_points)
+                      for o in parent.children}
+empty = [o for o in parent.children if o["mirrorcap_label"] == "M05"][0]
+scene.frame_set(2)                            # take frame 1, the last before the gap
+out["vendor_M05_frame2_m"] = list(empty.matrix_world.translation)
+
+# 2. Stabilize the sparse take: the stabilised take and its pivot in the scene, files on disk
+s.take = str(work / "sparse.c3d")
+s.stable_take = str(work / "stable.c3d")
+s.rigid_labels = "LFHD RFHD TFHD"
+out["stabilize"] = call(bpy.ops.mirrorcap.stabilize_take)
+out["stable_files"] = sorted(p.name for p in work.iterdir() if p.name.startswith("stable"))
+out["pivot_objects"] = [o.name for o in bpy.data.objects if "mirrorcap_pivot_mm" in o]
+report = json.loads((work / "stable.json").read_text())
+out["stable_pivot_mm"] = report["pivot_mm"]
+before = sorted(o.name for o in bpy.data.objects)
+out["stabilize_bad"] = call(bpy.ops.mirrorcap.stabilize_take, rigid="LFHD NOSE")
+out["stabilize_bad_unchanged"] = sorted(o.name for o in bpy.data.objects) == before
+
+# 3. the marker-map editor: pick an empty, then a vertex (Edit Mode), a landmark, rigid, ignore
+bpy.ops.mirrorcap.import_take(filepath=str(work / "sparse.c3d"))
+sparse = [o for o in bpy.data.objects if o.get("mirrorcap_take", "").endswith("sparse.c3d")][0]
+markers = {o["mirrorcap_label"]: o for o in sparse.children}
+bpy.ops.mirrorcap.add_generic_head()
+head = bpy.context.active_object
+s.head_object = head
+s.marker_map = str(work / "map.json")
+mapping = json.loads((work / "truth_map.json").read_text())
+
+
+def select_marker(label):
+    for o in bpy.data.objects:
+        o.select_set(False)
+    markers[label].select_set(True)
+
+
+results = []
+for label, role in mapping.items():
+    select_marker(label)
+    if isinstance(role, int):              # a vertex: select it on the head, as a user does in Edit Mode
+        sel = np.zeros(len(head.data.vertices), bool)
+        sel[role] = True
+        head.data.vertices.foreach_set("select", sel)
+        bpy.context.view_layer.objects.active = head
+        head.select_set(True)
+        results.append(call(bpy.ops.mirrorcap.map_marker, role="VERTEX"))
+    elif role.startswith("lm_"):
+        results.append(call(bpy.ops.mirrorcap.map_marker, role="LANDMARK", landmark=role))
+    else:
+        results.append(call(bpy.ops.mirrorcap.map_marker, role=role.upper()))
+out["map_calls"] = sorted(set(map(tuple, results)))
+out["map_written"] = json.loads((work / "map.json").read_text())
+for o in bpy.data.objects:
+    o.select_set(False)
+markers["F03"].select_set(True)
+markers["F04"].select_set(True)
+out["map_two_selected"] = call(bpy.ops.mirrorcap.map_marker, role="RIGID")
+out["map_unchanged"] = json.loads((work / "map.json").read_text()) == out["map_written"]
+
+# 4. Bake the sparse take with the map
+s.take = str(work / "sparse.c3d")
+out["bake"] = call(bpy.ops.mirrorcap.bake)
+out["bake_keys"] = len(head.data.shape_keys.key_blocks)
+print("RESULT " + json.dumps(out))
