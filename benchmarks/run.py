@@ -1,7 +1,7 @@
 """``make bench``: speed of the mirror core and the section 6.2 simulations.
 
     python -m benchmarks.run --out bench_results [--trials 100] [--workers 2] [--skip-simulation]
-        [--skip-extraction] [--skip-tracking] [--skip-animation] [--skip-batch]
+        [--skip-extraction] [--skip-tracking] [--skip-animation] [--skip-batch] [--skip-takes]
 
 Writes (atomically) into the output folder:
 
@@ -16,6 +16,7 @@ Writes (atomically) into the output folder:
   (speed, accuracy, completeness against the truth's visibility);
 * ``animation.json`` -- bake of 1,000 frames, head fit, rig accuracy, PCA error vs modes;
 * ``batch.json`` -- `mirrorcap batch` of 4 sample takes with 1 and 2 workers;
+* ``stabilize.json`` -- `mirrorcap stabilize` on synthetic 23-marker takes (accuracy over 20 noise draws, speed);
 * ``summary.md`` -- the tables quoted in the README (a skipped part reuses its last JSON).
 """
 
@@ -36,6 +37,7 @@ from mirrorcap.core.common.files import write_files_atomically
 
 from .animation import animation_summary, run_animation_benchmark
 from .batch import batch_summary, run_batch_benchmark
+from .takes import run_stabilize_benchmark, stabilize_summary
 from .extraction import run_extraction_benchmark
 from .tracking import run_stress_clip_benchmark, run_track_command_benchmark, run_tracking_benchmark
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
@@ -238,6 +240,7 @@ def main(argv=None) -> int:
     parser.add_argument("--skip-tracking", action="store_true", help="no tracking benchmark")
     parser.add_argument("--skip-animation", action="store_true", help="no head/fit/rig/bake benchmark")
     parser.add_argument("--skip-batch", action="store_true", help="no `mirrorcap batch` benchmark")
+    parser.add_argument("--skip-takes", action="store_true", help="no `mirrorcap stabilize` benchmark")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -301,6 +304,8 @@ def main(argv=None) -> int:
                             run_animation_benchmark)
     batch = measure_or_reuse(args.skip_batch, "batch.json", "batch bake of 4 takes, 1 and 2 workers ...",
                              run_batch_benchmark)
+    stab = measure_or_reuse(args.skip_takes, "stabilize.json", "stabilize: 23-marker takes, 20 noise draws ...",
+                            run_stabilize_benchmark)
     summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
     if stress:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(stress_summary(stress)) + "\n"
@@ -308,6 +313,8 @@ def main(argv=None) -> int:
         summary = summary.rstrip("\n") + "\n" + "\n".join(animation_summary(anim)) + "\n"
     if batch is not None:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(batch_summary(batch)) + "\n"
+    if stab is not None:
+        summary = summary.rstrip("\n") + "\n\n" + "\n".join(stabilize_summary(stab)) + "\n"
     files[out / "summary.md"] = summary
     write_files_atomically(files)
     print(summary)

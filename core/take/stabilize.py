@@ -42,6 +42,7 @@ from ..geometry.rigid import rigid_fit, robust_rigid_fit
 # towards the guess (|p - guess| / C, C in mm).
 PIVOT_WEIGHTS = (1.0, 1.0, 1.0)
 PIVOT_PULL_MM = 100.0
+PIVOT_SEARCH_FRAMES = 2000     # the pivot search looks at this many frames at most, evenly spread
 # below this rotation (degrees) about some axis the pivot is not determined along that axis
 MIN_PIVOT_ROTATION_DEG = 3.0
 # the guess: this far below the rigid markers' centroid, in multiples of the distance from
@@ -330,7 +331,9 @@ def stabilize(points, labels, rigid=None, method: str = "invariants", pivot="aut
                             "a pivot; the motion estimate is kept without one")
         else:
             guess = pivot_guess(ref_rigid, pts[ref, np.setdiff1d(np.arange(M), idx)])
-            centre, e, its = find_pivot(pts[complete][:, idx], guess)
+            tracks = pts[complete][:, idx]
+            step = max(1, len(tracks) // PIVOT_SEARCH_FRAMES)   # a long take: every step-th frame is plenty
+            centre, e, its = find_pivot(tracks[::step], guess)
             st.pivot_objective, st.pivot_iterations, st.pivot_status = float(e), its, "estimated"
             if vals[0] < limit:
                 axis = vecs[:, 0] * np.sign(vecs[np.argmax(np.abs(vecs[:, 0])), 0])
