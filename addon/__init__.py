@@ -18,10 +18,10 @@ The numbers all come from ``..core``; this layer reads and writes Blender data.
 import bpy
 
 from ..core import __version__
-from . import bake, capture, head, track
+from . import bake, capture, head, retarget, track
 from .common import properties
 
-FEATURES = (capture, track, head, bake)
+FEATURES = (capture, track, head, bake, retarget)
 PROPERTY_CLASSES: tuple = properties.CLASSES
 OPERATOR_CLASSES: tuple = tuple(cls for feature in FEATURES for cls in feature.OPERATORS)
 PANEL_CLASSES: tuple = tuple(cls for feature in FEATURES for cls in feature.PANELS)

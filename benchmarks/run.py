@@ -17,6 +17,7 @@ Writes (atomically) into the output folder:
 * ``animation.json`` -- bake of 1,000 frames, head fit, rig accuracy, PCA error vs modes;
 * ``batch.json`` -- `mirrorcap batch` of 4 sample takes with 1 and 2 workers;
 * ``stabilize.json`` -- `mirrorcap stabilize` on synthetic 23-marker takes (accuracy over 20 noise draws, speed);
+* ``arkit.json`` -- ARKit-52 weights from a 1,000-frame, 150-marker take (accuracy, solve time);
 * ``summary.md`` -- the tables quoted in the README (a skipped part reuses its last JSON).
 """
 
@@ -37,7 +38,7 @@ from mirrorcap.core.common.files import write_files_atomically
 
 from .animation import animation_summary, run_animation_benchmark
 from .batch import batch_summary, run_batch_benchmark
-from .takes import run_stabilize_benchmark, stabilize_summary
+from .takes import arkit_summary, run_arkit_benchmark, run_stabilize_benchmark, stabilize_summary
 from .extraction import run_extraction_benchmark
 from .tracking import run_stress_clip_benchmark, run_track_command_benchmark, run_tracking_benchmark
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
@@ -240,7 +241,7 @@ def main(argv=None) -> int:
     parser.add_argument("--skip-tracking", action="store_true", help="no tracking benchmark")
     parser.add_argument("--skip-animation", action="store_true", help="no head/fit/rig/bake benchmark")
     parser.add_argument("--skip-batch", action="store_true", help="no `mirrorcap batch` benchmark")
-    parser.add_argument("--skip-takes", action="store_true", help="no `mirrorcap stabilize` benchmark")
+    parser.add_argument("--skip-takes", action="store_true", help="no stabilize / ARKit benchmarks")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -306,6 +307,8 @@ def main(argv=None) -> int:
                              run_batch_benchmark)
     stab = measure_or_reuse(args.skip_takes, "stabilize.json", "stabilize: 23-marker takes, 20 noise draws ...",
                             run_stabilize_benchmark)
+    arkit = measure_or_reuse(args.skip_takes, "arkit.json", "ARKit-52 solve: 1,000 frames, 150 markers ...",
+                             run_arkit_benchmark)
     summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
     if stress:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(stress_summary(stress)) + "\n"
@@ -315,6 +318,8 @@ def main(argv=None) -> int:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(batch_summary(batch)) + "\n"
     if stab is not None:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(stabilize_summary(stab)) + "\n"
+    if arkit is not None:
+        summary = summary.rstrip("\n") + "\n\n" + "\n".join(arkit_summary(arkit)) + "\n"
     files[out / "summary.md"] = summary
     write_files_atomically(files)
     print(summary)

@@ -226,6 +226,26 @@ def bake(args) -> int:
     return 0
 
 
+def retarget(args) -> int:
+    from ..addon.retarget.retarget import run_retarget
+
+    if args.smoothness is not None and not args.smoothness >= 0:
+        raise MirrorCapError("--smoothness must be 0 or more")
+    res = run_retarget(args.take, args.head, args.target, args.output, target_object=args.target_object,
+                       method=args.method, csv=args.csv, head_pose_report=args.head_pose, report=args.report,
+                       marker_map=args.marker_map, neutral_frame=args.neutral_frame, smoothness=args.smoothness,
+                       head_object=args.head_object)
+    if not args.quiet:
+        print(f"retargeted {res['frames']} frames onto {res['target_object']}: {len(res['shapes_keyed'])} ARKit shapes "
+              f"keyed, fit residual {res['residual_mm']['rms']:.3f} mm RMS -> {res['output']}")
+        if res["missing_shape_names"]:
+            print(f"  the target lacks {len(res['missing_shape_names'])} shapes (skipped): "
+                  f"{', '.join(res['missing_shape_names'])}")
+        if res["unobservable"]:
+            print(f"  not observable from the markers (kept at 0): {', '.join(res['unobservable'])}")
+    return 0
+
+
 def batch(args) -> int:
     options = {"object": args.object, "mode": args.mode, "modes": args.modes, "neutral_frame": args.neutral_frame,
                "head_motion": args.head_motion, "no_blinks": args.no_blinks, "blink_seed": args.blink_seed,

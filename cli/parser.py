@@ -16,6 +16,8 @@ Commands (each documented in the README):
     colour classes learned from sample frames.
 ``mirrorcap bake TAKE.c3d --head HEAD.blend -o OUT.blend [--mode frames|pca] [--modes K] ...``
     bind the take to the head, run the face rig on every frame, write the head with shape keys.
+``mirrorcap retarget TAKE.c3d --head HEAD.blend --target TARGET.blend -o OUT.blend [--csv LIVELINK.csv]``
+    ARKit-52 weights of the take keyed on another character's shape keys.
 ``mirrorcap batch TAKES... --head HEAD.blend --out DIR [--workers N] [bake options]``
     bake many takes in parallel worker processes (:mod:`.batch`).
 ``mirrorcap info TAKE.c3d [--json]`` / ``mirrorcap export TAKE.c3d -o POINTS.csv``
@@ -241,6 +243,27 @@ def _blender_commands(sub) -> None:
     batch.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     _bake_options(batch)
     batch.set_defaults(func=commands.batch)
+
+    ret = sub.add_parser("retarget", help="a take onto another character through the ARKit-52 shapes (needs bpy)",
+                         description="Bind TAKE.c3d to the actor's head (its ARKit shape keys), solve per-frame "
+                                     "ARKit weights in [0, 1] (bounded least squares with temporal smoothness), key "
+                                     "the target's shape keys of the same names, write OUT.blend (and a Live Link "
+                                     "Face CSV).")
+    ret.add_argument("take", help="TAKE.c3d")
+    ret.add_argument("--head", required=True, help="HEAD.blend: the actor's head with the 52 ARKit shape keys")
+    ret.add_argument("--head-object", help="the actor's head object (default: the only head in HEAD.blend)")
+    ret.add_argument("--target", required=True, help="TARGET.blend: the character")
+    ret.add_argument("--target-object", help="the character's mesh (default: the only mesh with ARKit shape keys)")
+    ret.add_argument("-o", "--output", required=True, help="OUT.blend to write (the target file, animated)")
+    ret.add_argument("--method", choices=("arkit",), default="arkit", help="arkit: ARKit-52 weights (default)")
+    ret.add_argument("--csv", help="LIVELINK.csv to write (Live Link Face format)")
+    ret.add_argument("--head-pose", help="REPORT.json of `mirrorcap track` (default: estimate the head motion)")
+    ret.add_argument("--marker-map", metavar="MAP.json", help="bind markers by name (as for bake)")
+    ret.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
+    ret.add_argument("--smoothness", type=float, help="temporal smoothness lambda in mm^2 (default 2)")
+    ret.add_argument("--report", help="RETARGET.json to write")
+    ret.add_argument("-q", "--quiet", action="store_true")
+    ret.set_defaults(func=commands.retarget)
 
     demo = sub.add_parser("demo", help="the whole job on the embedded sample clip (needs bpy)",
                           description="Track the sample rig clip, fit the generic head to the sample scan, bind, "

@@ -29,23 +29,10 @@ from ...core.face.facerig import RigSettings
 from ...core.face.shapes import pca_shapes
 from ...core.take.c3d import read_c3d
 from ..common.frames import core_rotation_to_blender, core_to_blender
+from ..common.keys import key_fcurves
 from ..common.headio import find_head_object, open_blend, read_head, save_blend_atomically
 
 MODES = ("frames", "pca")
-
-
-def _key_fcurves(key, action, names, frames, values, interpolation: str):
-    """One F-curve per shape key ``names[i]`` with keyframes at ``frames`` ((n,) or (K, n)) of ``values (K, n)``."""
-    interp = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items[interpolation].value
-    values = np.asarray(values, float)
-    frames = np.broadcast_to(np.asarray(frames, float), values.shape)
-    n = values.shape[1]
-    for name, fr, vals in zip(names, frames, values):
-        fc = action.fcurve_ensure_for_datablock(key, f'key_blocks["{name}"].value')
-        fc.keyframe_points.add(n)
-        fc.keyframe_points.foreach_set("co", np.column_stack([fr, vals]).astype(np.float32).ravel())
-        fc.keyframe_points.foreach_set("interpolation", np.full(n, interp, np.int32))
-        fc.update()
 
 
 def _clear_mirrorcap_keys(obj):
@@ -86,7 +73,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
                 progress(i / F)
         # each key: 0 the frame before, 1 on its frame, 0 the frame after (constant steps)
         kf = np.stack([frames - 1, frames, frames + 1], 1)
-        _key_fcurves(key, action, names, kf, np.tile([0.0, 1.0, 0.0], (F, 1)), "CONSTANT")
+        key_fcurves(key, action, names, kf, np.tile([0.0, 1.0, 0.0], (F, 1)), "CONSTANT")
     else:
         pca = pca_shapes(D, n_modes)
         names = [f"mode_{k + 1:02d}" for k in range(n_modes)]
@@ -94,7 +81,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
             kb = obj.shape_key_add(name=name, from_mix=False)
             kb.slider_min, kb.slider_max, kb.value = -1.0, 1.0, 0.0
             kb.points.foreach_set("co", core_to_blender(neutral_mm + pca.modes[k]).astype(np.float32).ravel())
-        _key_fcurves(key, action, names, frames, pca.weights.T, "LINEAR")
+        key_fcurves(key, action, names, frames, pca.weights.T, "LINEAR")
         out.update({"modes": int(n_modes), "pca_max_error_mm": pca.max_error_mm, "pca_mean_error_mm": pca.mean_error_mm,
                     "energy": [float(e) for e in pca.energy]})
     if head_motion is not None:

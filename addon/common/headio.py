@@ -88,6 +88,26 @@ def read_head(obj) -> HeadModel:
                      hinge=None if hinge is None else blender_to_core(np.asarray(hinge, float).reshape(2, 3)))
 
 
+def read_shape_keys(obj) -> dict:
+    """``{name: (V, 3) offsets in core mm}`` of a mesh object's shape keys (relative to its
+    reference key; the reference itself left out)."""
+    key = obj.data.shape_keys if obj is not None and obj.type == "MESH" else None
+    if key is None:
+        return {}
+    nv = len(obj.data.vertices)
+    base = np.empty(nv * 3, np.float32)
+    key.reference_key.points.foreach_get("co", base)
+    base = blender_to_core(base.reshape(-1, 3))
+    out = {}
+    co = np.empty(nv * 3, np.float32)
+    for kb in key.key_blocks:
+        if kb == key.reference_key:
+            continue
+        kb.points.foreach_get("co", co)
+        out[kb.name] = blender_to_core(co.reshape(-1, 3)) - base
+    return out
+
+
 def find_head_object(name: str | None = None):
     """The named mesh object, or the only mesh object with region groups in the file."""
     if name:

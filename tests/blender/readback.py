@@ -20,7 +20,6 @@ for kb in key.key_blocks:
     co = np.empty(3 * n, np.float32)
     kb.data.foreach_get("co", co)
     blocks[kb.name] = co.reshape(-1, 3)
-names = [kb.name for kb in key.key_blocks if kb.name.startswith(("frame_", "mode_"))]
 scene = bpy.context.scene
 frames = list(range(scene.frame_start, scene.frame_end + 1))
 fcurves = {}
@@ -29,6 +28,9 @@ for layer in key.animation_data.action.layers:
         for bag in strip.channelbags:
             for fc in bag.fcurves:
                 fcurves[fc.data_path.split('"')[1]] = fc
+# a bake's keys (frame_/mode_), else every animated key (a retarget's ARKit shapes)
+names = [kb.name for kb in key.key_blocks if kb.name.startswith(("frame_", "mode_"))] or \
+    [kb.name for kb in key.key_blocks if kb.name in fcurves]
 values = np.array([[fcurves[nm].evaluate(f) for nm in names] for f in frames])
 evaluated = np.empty((len(frames), n, 3), np.float32)
 for i, f in enumerate(frames):
@@ -39,6 +41,6 @@ for i, f in enumerate(frames):
     mesh.vertices.foreach_get("co", co)
     evaluated[i] = co.reshape(-1, 3)
     ev.to_mesh_clear()
-np.savez(out, basis=blocks["Basis"], keys=np.stack([blocks[nm] for nm in names]), names=np.array(names),
+np.savez(out, basis=blocks[key.reference_key.name], keys=np.stack([blocks[nm] for nm in names]), names=np.array(names),
          values=values, frames=np.array(frames), fps=scene.render.fps, evaluated=evaluated)
 print(json.dumps({"keys": len(names), "frames": len(frames)}))

@@ -1,0 +1,122 @@
+"""``mirrorcap retarget``: a take onto another character through the 52 ARKit shapes.
+
+Data flow: TAKE.c3d -> :func:`core.face.bind.bind_take` on the actor's head (HEAD.blend: the
+generic head or the head fitted to the performer, carrying the ARKit shape keys) ->
+:func:`core.retarget.arkit.solve_weights` -> the target's shape keys of the same names
+(matched case-insensitively) keyed on every frame in TARGET.blend, saved as OUT.blend; the
+Live Link Face CSV and RETARGET.json beside it.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ...core.common.errors import InputError
+from ...core.common.files import write_files_atomically
+from ...core.face.animate import head_pose_from_report
+from ...core.face.bind import bind_take, load_marker_map
+from ...core.retarget.arkit import ARKIT_SHAPES, arkit_basis, head_angles, match_shape_names, solve_weights
+from ...core.retarget.livelink import livelink_csv
+from ...core.take.c3d import read_c3d
+from ..common.headio import find_head_object, open_blend, read_head, read_shape_keys, save_blend_atomically
+from ..common.keys import key_fcurves
+
+METHODS = ("arkit",)
+
+
+def find_target_object(name: str | None):
+    """The named object, or the only mesh whose shape keys include ARKit names."""
+    if name:
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            raise InputError(f"the target file has no object named {name!r} "
+                             f"(objects: {', '.join(o.name for o in bpy.data.objects) or 'none'})")
+        return obj
+    arkit = {n.lower() for n in ARKIT_SHAPES}
+    found = [o for o in bpy.data.objects if o.type == "MESH" and o.data.shape_keys is not None
+             and any(kb.name.lower() in arkit for kb in o.data.shape_keys.key_blocks)]
+    if len(found) == 1:
+        return found[0]
+    if not found:
+        raise InputError("the target file has no mesh with ARKit-named shape keys (eyeBlinkLeft, jawOpen, ...); "
+                         "name the object with --target-object")
+    raise InputError("the target file has several meshes with ARKit shape keys; name one with --target-object: "
+                     + ", ".join(o.name for o in found))
+
+
+def key_weights(obj, solved_names, weights, frame_start: int = 1) -> dict:
+    """Key ``weights (F, K)`` on ``obj``'s shape keys named like ``solved_names``; returns
+    ``{"keyed": [...], "missing": [...]}``."""
+    key = obj.data.shape_keys
+    if key is None:
+        raise InputError(f"{obj.name} has no shape keys")
+    found, missing = match_shape_names([kb.name for kb in key.key_blocks if kb != key.reference_key], solved_names)
+    if not found:
+        raise InputError(f"{obj.name} has none of the ARKit shape keys (eyeBlinkLeft, jawOpen, ...)")
+    if key.animation_data is None:
+        key.animation_data_create()
+    action = bpy.data.actions.new(f"{obj.name}_mirrorcap_arkit")
+    key.animation_data.action = action
+    cols = [solved_names.index(n) for n in found]
+    targets = [found[n] for n in found]
+    for t in targets:
+        key.key_blocks[t].value = 0.0
+    F = weights.shape[0]
+    key_fcurves(key, action, targets, frame_start + np.arange(F), np.asarray(weights)[:, cols].T, "LINEAR")
+    return {"keyed": targets, "missing": missing}
+
+
+def run_retarget(take, head_blend, target_blend, output, target_object=None, method: str = "arkit",
+                 csv=None, head_pose_report=None, report=None, marker_map=None, neutral_frame: int = 0,
+                 smoothness: float | None = None, head_object=None) -> dict:
+    """The whole ``mirrorcap retarget``. Every output is written only once all succeeded."""
+    if method not in METHODS:
+        raise InputError(f"--method must be one of {', '.join(METHODS)}")
+    for path in (output, csv, report):
+        if path is not None and not Path(path).resolve().parent.is_dir():
+            raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
+    t0 = time.perf_counter()
+    data = read_c3d(take)
+    F = data["points"].shape[0]
+    pose = None if head_pose_report is None else head_pose_from_report(head_pose_report, F)
+    mapping = load_marker_map(marker_map) if marker_map else None
+    open_blend(head_blend)
+    actor = find_head_object(head_object)
+    actor_name = actor.name
+    head = read_head(actor)
+    head.validate()
+    shape_keys = read_shape_keys(actor)
+    binding = bind_take(head, data["labels"], data["points"], neutral_frame=neutral_frame, head_pose=pose,
+                        marker_map=mapping)
+    names, basis = arkit_basis(shape_keys, binding.vertices)
+    t1 = time.perf_counter()
+    kwargs = {} if smoothness is None else {"smoothness": smoothness}
+    solve = solve_weights(basis, binding.displacements, names, **kwargs)
+    t2 = time.perf_counter()
+    angles = head_angles(binding.head_motion[0], head.face_axes())
+    open_blend(target_blend)
+    target = find_target_object(target_object)
+    keyed = key_weights(target, names, solve.weights)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, F
+    scene.render.fps = max(1, int(round(data["rate"])))
+    result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
+              "target_object": target.name, "output": str(output), "method": method, "frames": F,
+              "rate": data["rate"], "markers": len(binding.labels), "registration": binding.registration,
+              "landmark_rms_mm": binding.landmark_rms_mm, "solve_iterations": solve.iterations,
+              "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"], **solve.report(),
+              "timings_s": {"bind_s": t1 - t0, "solve_s": t2 - t1}}
+    save_blend_atomically(output)
+    files = {}
+    if csv is not None:
+        files[Path(csv)] = livelink_csv(solve.weights, names, data["rate"], head=angles)
+    result["timings_s"]["total_s"] = time.perf_counter() - t0
+    if report is not None:
+        files[Path(report)] = json.dumps(result, indent=1) + "\n"
+    write_files_atomically(files)
+    return result

@@ -1,0 +1,218 @@
+"""Retargeting through the ARKit-52 shapes (#19): weights recovered from a marker take of a
+performance with known weights, no left-to-right leak, a still neutral, the Live Link Face
+CSV, and the whole `mirrorcap retarget` onto a character of another topology and proportions,
+read back from OUT.blend with bpy (evaluated mesh)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+
+from mirrorcap.core.common.errors import InputError
+from mirrorcap.core.face.bind import bind_take
+from mirrorcap.core.face.headfit import subdivide
+from mirrorcap.core.face.headio import load_head_npz, save_head_npz
+from mirrorcap.core.face.head import HeadModel
+from mirrorcap.core.retarget.arkit import ARKIT_SHAPES, apply_exclusions, arkit_basis, match_shape_names, solve_weights
+from mirrorcap.core.retarget.livelink import BLEND_SHAPE_COUNT, HEADER, livelink_csv, read_livelink_csv, timecode
+from mirrorcap.core.take.c3d import write_c3d
+from mirrorcap.synthetic.headsim import head_motion, performance, place_markers
+
+HEAD_NPZ = ROOT / "sample_scenes" / "generic_head" / "head.npz"
+HEAD_BLEND = ROOT / "sample_scenes" / "generic_head" / "head.blend"
+# the header row of a Live Link Face take, as the app writes it
+APP_HEADER = (
+    "Timecode,BlendShapeCount,EyeBlinkLeft,EyeLookDownLeft,EyeLookInLeft,EyeLookOutLeft,EyeLookUpLeft,"
+    "EyeSquintLeft,EyeWideLeft,EyeBlinkRight,EyeLookDownRight,EyeLookInRight,EyeLookOutRight,EyeLookUpRight,"
+    "EyeSquintRight,EyeWideRight,JawForward,JawRight,JawLeft,JawOpen,MouthClose,MouthFunnel,MouthPucker,"
+    "MouthRight,MouthLeft,MouthSmileLeft,MouthSmileRight,MouthFrownLeft,MouthFrownRight,MouthDimpleLeft,"
+    "MouthDimpleRight,MouthStretchLeft,MouthStretchRight,MouthRollLower,MouthRollUpper,MouthShrugLower,"
+    "MouthShrugUpper,MouthPressLeft,MouthPressRight,MouthLowerDownLeft,MouthLowerDownRight,MouthUpperUpLeft,"
+    "MouthUpperUpRight,BrowDownLeft,BrowDownRight,BrowInnerUp,BrowOuterUpLeft,BrowOuterUpRight,CheekPuff,"
+    "CheekSquintLeft,CheekSquintRight,NoseSneerLeft,NoseSneerRight,TongueOut,HeadYaw,HeadPitch,HeadRoll,"
+    "LeftEyeYaw,LeftEyePitch,LeftEyeRoll,RightEyeYaw,RightEyePitch,RightEyeRoll")
+# shapes that move the markers (not the eyeballs' look directions, the lids' widening or the tongue)
+CHANNELS = ["eyeBlinkLeft", "eyeSquintLeft", "eyeBlinkRight", "eyeSquintRight", "jawForward", "jawRight", "jawOpen",
+            "mouthClose", "mouthFunnel", "mouthPucker", "mouthRight", "mouthSmileLeft", "mouthSmileRight",
+            "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthStretchRight", "mouthRollLower",
+            "mouthPressLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "browDownLeft", "browInnerUp",
+            "browOuterUpRight", "cheekPuff", "cheekSquintLeft", "noseSneerRight"]
+
+
+@pytest.fixture(scope="module")
+def head_and_keys():
+    return load_head_npz(HEAD_NPZ, with_shape_keys=True)
+
+
+def _take(head, keys, channels=CHANNELS, frames=300, noise=0.1, seed=2, still=False):
+    """A ~150-marker take of a performance with known ARKit weights, the head moving."""
+    rng = np.random.default_rng(seed)
+    verts, labels = place_markers(head, 150, 1)
+    _, W = performance(head, keys, frames, 30.0, seed, channels={n: {n: 1.0} for n in channels})
+    W = np.zeros_like(W) if still else apply_exclusions(W, channels)
+    D = np.einsum("fk,kvd->fvd", W, np.stack([keys[n] for n in channels]))
+    R, t = head_motion(frames, 30.0, 10.0, seed + 1)
+    q = head.vertices[verts][None] + D[:, verts]
+    pts = np.einsum("fij,fmj->fmi", R, q) + (t + [0.0, 0.0, 600.0])[:, None] + rng.normal(0, noise, (frames, 150, 3))
+    return labels, pts, W
+
+
+def _solve(head, keys, labels, pts):
+    b = bind_take(head, labels, pts)
+    names, B = arkit_basis(keys, b.vertices)
+    return solve_weights(B, b.displacements, names)
+
+
+def _full(W, channels, names):
+    out = np.zeros((W.shape[0], len(names)))
+    for k, n in enumerate(channels):
+        out[:, names.index(n)] = W[:, k]
+    return out
+
+
+def test_arkit_weights_are_recovered_from_a_marker_take(head_and_keys):
+    """27 channels, head motion, 0.1 mm noise, 150 markers: RMS <= 0.05, max <= 0.2."""
+    head, keys = head_and_keys
+    labels, pts, W = _take(head, keys, seed=12)       # the solver's defaults were set on seeds 2-8
+    sol = _solve(head, keys, labels, pts)
+    truth = _full(W, CHANNELS, sol.names)
+    err = sol.weights - truth
+    print(f"arkit: RMS {np.sqrt(np.mean(err ** 2)):.4f}, max {np.abs(err).max():.3f}, {sol.iterations} iterations")
+    assert np.sqrt(np.mean(err ** 2)) <= 0.05 and np.abs(err).max() <= 0.2
+    assert W.max() > 0.8                                    # the performance uses the range
+    assert np.all((sol.weights >= 0) & (sol.weights <= 1))
+    assert {"tongueOut", "eyeLookInLeft"} <= set(sol.unobservable)
+    close, jaw = sol.names.index("mouthClose"), sol.names.index("jawOpen")
+    assert np.all(sol.weights[:, close] <= sol.weights[:, jaw] + 1e-12)
+    assert np.all(np.minimum(sol.weights[:, sol.names.index("jawLeft")], sol.weights[:, sol.names.index("jawRight")]) == 0)
+
+
+def test_left_expressions_do_not_leak_right_and_a_held_neutral_is_still(head_and_keys):
+    head, keys = head_and_keys
+    left = [n for n in CHANNELS if n.endswith("Left")]
+    labels, pts, W = _take(head, keys, channels=left, frames=150, seed=14)
+    sol = _solve(head, keys, labels, pts)
+    right = [sol.names.index(n.replace("Left", "Right")) for n in left]
+    assert np.abs(sol.weights[:, right]).max() < 0.05
+    err = sol.weights - _full(W, left, sol.names)
+    # the issue's bounds are for the >= 20-channel take above; here the left shapes' RMS. (The worst
+    # single value, 0.21 on this take, is eyeBlinkLeft: the markers avoid the lids, so a blink is seen
+    # only through its neighbours; README.)
+    assert np.sqrt(np.mean(err ** 2)) <= 0.05
+    labels, pts, _ = _take(head, keys, frames=90, seed=15, still=True)
+    sol = _solve(head, keys, labels, pts)
+    print(f"left-only: right max {np.abs(sol.weights[:, right]).max():.3f}; neutral: jitter (sd) "
+          f"{sol.weights.std(axis=0).max():.4f}, max {sol.weights.max():.3f}")
+    assert sol.weights.std(axis=0).max() < 0.01 and sol.weights.max() < 0.05
+
+
+def test_live_link_csv_header_rows_and_reader(tmp_path):
+    assert HEADER == APP_HEADER and BLEND_SHAPE_COUNT == 61 and len(APP_HEADER.split(",")) == 63
+    assert timecode(0, 30.0) == "00:00:00:00.000" and timecode(95, 30.0) == "00:00:03:05.000"
+    assert timecode(3600 * 60 + 7, 60.0) == "01:00:00:07.000"
+    rng = np.random.default_rng(0)
+    names = ARKIT_SHAPES[::2]
+    W = rng.uniform(0, 1, (40, len(names)))
+    head = rng.uniform(-0.3, 0.3, (40, 3))
+    text = livelink_csv(W, names, 30.0, head=head)
+    lines = text.splitlines()
+    assert lines[0] == APP_HEADER and len(lines) == 41
+    assert all(ln.split(",")[1] == "61" and len(ln.split(",")) == 63 for ln in lines[1:])
+    (tmp_path / "take.csv").write_text(text)
+    back = read_livelink_csv(tmp_path / "take.csv")
+    assert np.allclose(back["weights"][:, [ARKIT_SHAPES.index(n) for n in names]], W, atol=1e-6)
+    assert np.allclose(back["rotations"][:, :3], head, atol=1e-6) and not back["rotations"][:, 3:].any()
+    (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(InputError, match="not a Live Link Face CSV"):
+        read_livelink_csv(tmp_path / "bad.csv")
+
+
+def test_shape_names_match_case_insensitively():
+    found, missing = match_shape_names(["Basis", "JAWOPEN", "eyeblinkleft", "Smile"], ["jawOpen", "eyeBlinkLeft", "cheekPuff"])
+    assert found == {"jawOpen": "JAWOPEN", "eyeBlinkLeft": "eyeblinkleft"} and missing == ["cheekPuff"]
+
+
+def _run(args):
+    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=900, cwd=ROOT,
+                          env=dict(os.environ))
+
+
+def _character(head, keys, tmp_path):
+    """Another topology (one midpoint subdivision: 4x the triangles) and proportions (12 % wider,
+    12 % shorter), carrying the same 52 shapes; written as TARGET.blend with bpy."""
+    T = head.triangles()
+    V2, T2 = subdivide(head.vertices, T, 1)
+    scale = np.array([1.12, 0.88, 1.0])                      # core x: across the face, y: down
+    keys2 = {n: (subdivide(head.vertices + off, T, 1)[0] - V2) * scale for n, off in keys.items()}
+    char = HeadModel(vertices=V2 * scale, polygons=T2.ravel(), polygon_sizes=np.full(len(T2), 3),
+                     groups={}, name="Character")
+    save_head_npz(tmp_path / "character.npz", char, keys2)
+    code = ("import sys\nfrom mirrorcap.core.face.headio import load_head_npz\n"
+            "from mirrorcap.addon.common.headio import write_head_blend\n"
+            f"h, k = load_head_npz({str(tmp_path / 'character.npz')!r}, with_shape_keys=True)\n"
+            f"write_head_blend(h, {str(tmp_path / 'target.blend')!r}, k)\n")
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stdout + res.stderr
+    return char, keys2
+
+
+def test_retarget_command_onto_another_character(tmp_path, head_and_keys):
+    head, keys = head_and_keys
+    labels, pts, W = _take(head, keys, frames=60, seed=6)
+    write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
+    char, keys2 = _character(head, keys, tmp_path)
+    out = tmp_path / "out.blend"
+    res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.c3d", "--head", HEAD_BLEND, "--target",
+                tmp_path / "target.blend", "-o", out, "--csv", tmp_path / "take.csv", "--report", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "retargeted 60 frames onto Character" in res.stdout
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["missing_shape_names"] == [] and len(report["shapes_keyed"]) == 52
+    rb_out = tmp_path / "rb.npz"
+    r = _run([ROOT / "tests" / "blender" / "readback.py", out, "Character", rb_out])
+    assert r.returncode == 0, r.stdout + r.stderr
+    rb = np.load(rb_out)
+    to_core = lambda p: 1000.0 * np.stack([p[..., 0], -p[..., 2], p[..., 1]], -1)  # noqa: E731
+    seen = to_core(rb["evaluated"])                          # what a user sees at frames 1..60
+    truth = char.vertices[None] + np.einsum("fk,kvd->fvd", W, np.stack([keys2[n] for n in CHANNELS]))
+    err = np.sqrt(np.mean(np.sum((seen - truth) ** 2, axis=2), axis=1))
+    print(f"retarget onto the character: per-frame RMS max {err.max():.3f} mm, mean {err.mean():.3f} mm")
+    assert seen.shape == truth.shape and err.max() < 0.5
+    moving = np.linalg.norm(truth - char.vertices[None], axis=2).max()
+    assert moving > 3.0                                        # the character does move
+    # the CSV's values equal the keyed F-curves frame by frame
+    csv = read_livelink_csv(tmp_path / "take.csv")
+    names = list(rb["names"])
+    keyed = rb["values"]                                       # (F, K) evaluated F-curves
+    cols = [ARKIT_SHAPES.index(n) for n in names]
+    assert np.abs(csv["weights"][:, cols] - keyed).max() < 1e-5
+    assert (tmp_path / "take.csv").read_text().splitlines()[0] == APP_HEADER
+
+
+def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):
+    head, keys = head_and_keys
+    labels, pts, _ = _take(head, keys, frames=10, seed=7)
+    write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
+    holey = pts.copy()
+    holey[0, 5] = np.nan
+    write_c3d(tmp_path / "holey.c3d", labels, holey, 30.0)
+    out = tmp_path / "out.blend"
+    cases = [(["--target", HEAD_BLEND, "--target-object", "Nobody"], "no object named 'Nobody'"),
+             (["--target", tmp_path / "missing.blend"], "does not exist"),
+             (["--target", HEAD_BLEND, "--head", tmp_path / "take.c3d"], "not a readable .blend")]
+    for extra, words in cases:
+        args = ["-m", "mirrorcap", "retarget", tmp_path / "take.c3d", "--head", HEAD_BLEND, "-o", out,
+                "--csv", tmp_path / "x.csv"]
+        res = _run(args + extra)
+        assert res.returncode == 2 and words in res.stderr, (extra, res.stderr)
+        assert not out.exists() and not (tmp_path / "x.csv").exists()
+    res = _run(["-m", "mirrorcap", "retarget", tmp_path / "holey.c3d", "--head", HEAD_BLEND, "--target", HEAD_BLEND,
+                "-o", out])
+    assert res.returncode == 2 and "neutral frame" in res.stderr and not out.exists()
