@@ -227,8 +227,22 @@ def bake(args) -> int:
 
 
 def retarget(args) -> int:
-    from ..addon.retarget.retarget import run_retarget
+    from ..addon.retarget.retarget import run_livelink, run_retarget
 
+    if str(args.take).lower().endswith(".csv"):
+        if args.csv:
+            raise MirrorCapError("--csv writes the CSV of a C3D take; the take is already a CSV")
+        res = run_livelink(args.take, args.target, args.output, target_object=args.target_object, rate=args.rate,
+                           report=args.report)
+        if not args.quiet:
+            print(f"keyed {res['frames']} frames of {args.take} onto {res['target_object']}: "
+                  f"{len(res['shapes_keyed'])} ARKit shapes -> {res['output']}")
+            if res["missing_shape_names"]:
+                print(f"  the target lacks {len(res['missing_shape_names'])} shapes (skipped): "
+                      f"{', '.join(res['missing_shape_names'])}")
+        return 0
+    if not args.head:
+        raise MirrorCapError("--head HEAD.blend (the actor's head with the ARKit shape keys) is needed for a C3D take")
     if args.smoothness is not None and not args.smoothness >= 0:
         raise MirrorCapError("--smoothness must be 0 or more")
     res = run_retarget(args.take, args.head, args.target, args.output, target_object=args.target_object,

@@ -194,6 +194,16 @@ def test_retarget_command_onto_another_character(tmp_path, head_and_keys):
     cols = [ARKIT_SHAPES.index(n) for n in names]
     assert np.abs(csv["weights"][:, cols] - keyed).max() < 1e-5
     assert (tmp_path / "take.csv").read_text().splitlines()[0] == APP_HEADER
+    # the reverse: the CSV (as an iPhone take would come) keys the character the same way
+    out2 = tmp_path / "from_csv.blend"
+    res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.csv", "--target", tmp_path / "target.blend",
+                "-o", out2, "--rate", "30"])
+    assert res.returncode == 0 and "keyed 60 frames" in res.stdout, res.stdout + res.stderr
+    r = _run([ROOT / "tests" / "blender" / "readback.py", out2, "Character", tmp_path / "rb2.npz"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    rb2 = np.load(tmp_path / "rb2.npz")
+    assert list(rb2["names"]) == names and np.abs(rb2["values"] - keyed).max() < 1e-5
+    assert int(rb2["fps"]) == 30 and np.abs(rb2["evaluated"] - rb["evaluated"]).max() < 1e-5
 
 
 def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):

@@ -21,7 +21,7 @@ from ...core.common.files import write_files_atomically
 from ...core.face.animate import head_pose_from_report
 from ...core.face.bind import bind_take, load_marker_map
 from ...core.retarget.arkit import ARKIT_SHAPES, arkit_basis, head_angles, match_shape_names, solve_weights
-from ...core.retarget.livelink import livelink_csv
+from ...core.retarget.livelink import livelink_csv, read_livelink_csv
 from ...core.take.c3d import read_c3d
 from ..common.headio import find_head_object, open_blend, read_head, read_shape_keys, save_blend_atomically
 from ..common.keys import key_fcurves
@@ -69,6 +69,33 @@ def key_weights(obj, solved_names, weights, frame_start: int = 1) -> dict:
     F = weights.shape[0]
     key_fcurves(key, action, targets, frame_start + np.arange(F), np.asarray(weights)[:, cols].T, "LINEAR")
     return {"keyed": targets, "missing": missing}
+
+
+def run_livelink(csv_path, target_blend, output, target_object=None, rate: float = 60.0, report=None) -> dict:
+    """Key a character from a Live Link Face CSV (an iPhone take, or one MirrorCap wrote): its
+    52 weights on the target's shape keys of the same names, one CSV row per frame."""
+    for path in (output, report):
+        if path is not None and not Path(path).resolve().parent.is_dir():
+            raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
+    if not rate > 0:
+        raise InputError("--rate must be positive")
+    table = read_livelink_csv(csv_path)
+    weights = np.clip(table["weights"], 0.0, 1.0)
+    if not len(weights):
+        raise InputError(f"{csv_path} has no frames")
+    open_blend(target_blend)
+    target = find_target_object(target_object)
+    keyed = key_weights(target, table["names"], weights)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, len(weights)
+    scene.render.fps = max(1, int(round(rate)))
+    save_blend_atomically(output)
+    result = {"csv": str(csv_path), "target": str(target_blend), "target_object": target.name, "output": str(output),
+              "frames": len(weights), "rate": rate, "shapes_keyed": keyed["keyed"],
+              "missing_shape_names": keyed["missing"], "missing_csv_columns": table["missing_columns"]}
+    if report is not None:
+        write_files_atomically({Path(report): json.dumps(result, indent=1) + "\n"})
+    return result
 
 
 def run_retarget(take, head_blend, target_blend, output, target_object=None, method: str = "arkit",
