@@ -65,6 +65,10 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     rigid_labels: StringProperty(name="Rigid Labels", default="",
                                  description="labels of >= 3 rigid (headband) markers, space-separated; empty: the "
                                              "selected marker empties, or the markers that deform least")
+    retarget_target: PointerProperty(name="Character", type=bpy.types.Object, poll=_is_mesh,
+                                     description="the mesh with ARKit-named shape keys that Retarget animates")
+    livelink_csv: StringProperty(name="Live Link CSV", subtype="FILE_PATH", default="",
+                                 description="LIVELINK.csv that Retarget writes (optional)")
     marker_map: StringProperty(name="Marker Map", subtype="FILE_PATH", default="",
                                description="MAP.json binding markers by name (LABEL: lm_<name> | vertex | rigid | "
                                            "ignore); the map buttons below write it")

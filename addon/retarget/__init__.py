@@ -1,7 +1,7 @@
 """Retargeting (3D View and ``mirrorcap retarget``): a take's expressions as ARKit-52 weights,
 keyed on any character's shape keys of the same names, and the Live Link Face CSV."""
 
-OPERATORS: tuple = ()
-PANELS: tuple = ()
+from .operators import OPERATORS
+from .panels import PANELS
 
 __all__ = ["OPERATORS", "PANELS"]

@@ -99,4 +99,20 @@ out["map_unchanged"] = json.loads((work / "map.json").read_text()) == out["map_w
 s.take = str(work / "sparse.c3d")
 out["bake"] = call(bpy.ops.mirrorcap.bake)
 out["bake_keys"] = len(head.data.shape_keys.key_blocks)
+
+# 5. Retarget the sparse take onto a second character (another generic head, its ARKit keys)
+bpy.ops.mirrorcap.add_generic_head()
+character = bpy.context.active_object
+character.name = "Character"
+s.head_object = head
+s.retarget_target = character
+s.livelink_csv = str(work / "live.csv")
+out["retarget_self"] = call(bpy.ops.mirrorcap.retarget, target_object=head.name)
+out["retarget"] = call(bpy.ops.mirrorcap.retarget)
+action = character.data.shape_keys.animation_data.action
+curves = fcurves(action)
+out["retarget_keyed"] = len(curves)
+jaw = [fc for fc in curves if "jawOpen" in fc.data_path][0]
+out["retarget_jaw_max"] = max(k.co[1] for k in jaw.keyframe_points)
+out["csv_rows"] = len((work / "live.csv").read_text().splitlines())
 print("RESULT " + json.dumps(out))

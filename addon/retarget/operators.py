@@ -1,0 +1,89 @@
+"""Retarget (3D View): the scene's take onto a character through the ARKit-52 shapes.
+
+The actor is the scene's head (the generic head or the fitted one, carrying the ARKit shape
+keys); the character is any mesh with ARKit-named shape keys. The bind and the solve run as a
+modal job (pure core, no ``bpy``); the character's keys change only once they succeeded."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import FloatProperty, IntProperty, StringProperty
+
+from ...core.common.errors import InputError
+from ..common.inputs import head_object_from, input_path, required, scene_settings
+from ..common.jobs import MirrorCapJobOperator
+
+
+class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
+    """Solve the take's ARKit-52 weights on the actor's head and key them on the character's shape keys"""
+
+    bl_idname = "mirrorcap.retarget"
+    bl_label = "Retarget Take"
+
+    take: StringProperty(name="Take", subtype="FILE_PATH", description="TAKE.c3d (default: the scene's)")
+    head_object: StringProperty(name="Actor", description="the actor's head with ARKit shape keys (default: the scene's head)")
+    target_object: StringProperty(name="Character", description="the character's mesh (default: the scene's)")
+    csv: StringProperty(name="Live Link CSV", subtype="FILE_PATH", description="LIVELINK.csv to write (optional)")
+    neutral_frame: IntProperty(name="Neutral Frame", default=0, min=0)
+    smoothness: FloatProperty(name="Smoothness", default=8.0, min=0.0, description="temporal smoothness lambda, mm^2")
+
+    def prepare(self, context):
+        from ...core.face.bind import load_marker_map
+        from ...core.take.c3d import read_c3d
+        from ..common.headio import read_head, read_shape_keys
+
+        s = scene_settings(context)
+        actor = head_object_from(context, self.head_object)
+        target = bpy.data.objects.get(self.target_object) if self.target_object else s.retarget_target
+        if target is None or target.type != "MESH":
+            raise InputError("choose the character (a mesh with ARKit shape keys) first")
+        if target == actor:
+            raise InputError("the character is the actor's head itself: choose another mesh")
+        if target.data.shape_keys is None:
+            raise InputError(f"{target.name} has no shape keys")
+        csv = input_path(self.csv or s.livelink_csv, must_exist=False)
+        if csv is not None and not csv.parent.is_dir():
+            raise InputError(f"the CSV's folder {csv.parent} does not exist (save the .blend first for // paths)")
+        data = read_c3d(required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)"))
+        head = read_head(actor)
+        head.validate()
+        keys = read_shape_keys(actor)
+        mapping = load_marker_map(input_path(s.marker_map, what="marker map")) if s.marker_map else None
+        self._target, self._csv, self._rate = target.name, csv, data["rate"]
+
+        def work(progress):
+            from ...core.face.bind import bind_take
+            from ...core.retarget.arkit import arkit_basis, head_angles, solve_weights
+
+            progress(0.1, "binding")
+            b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame, marker_map=mapping)
+            names, basis = arkit_basis(keys, b.vertices)
+            progress(0.5, "solving the ARKit weights")
+            solve = solve_weights(basis, b.displacements, names, smoothness=self.smoothness)
+            progress(0.95, "keying")
+            return solve, head_angles(b.head_motion[0], head.face_axes())
+
+        return work
+
+    def finish(self, context, result):
+        from ...core.common.files import write_files_atomically
+        from ...core.retarget.livelink import livelink_csv
+        from .retarget import key_weights
+
+        solve, angles = result
+        target = bpy.data.objects[self._target]
+        text = livelink_csv(solve.weights, solve.names, self._rate, head=angles) if self._csv else None
+        keyed = key_weights(target, solve.names, solve.weights)
+        F = solve.weights.shape[0]
+        context.scene.frame_start, context.scene.frame_end = 1, F
+        context.scene.render.fps = max(1, int(round(self._rate)))
+        if text is not None:
+            write_files_atomically({self._csv: text})
+        if keyed["missing"]:
+            self.report({"WARNING"}, f"{target.name} lacks {len(keyed['missing'])} ARKit shapes (skipped): "
+                                     + ", ".join(keyed["missing"]))
+        return (f"retargeted {F} frames onto {target.name}: {len(keyed['keyed'])} shapes keyed, "
+                f"fit residual {float((solve.residual_mm ** 2).mean() ** 0.5):.3f} mm RMS")
+
+
+OPERATORS = (MIRRORCAP_OT_retarget,)
