@@ -248,7 +248,8 @@ def retarget(args) -> int:
     res = run_retarget(args.take, args.head, args.target, args.output, target_object=args.target_object,
                        method=args.method, csv=args.csv, head_pose_report=args.head_pose, report=args.report,
                        marker_map=args.marker_map, neutral_frame=args.neutral_frame, smoothness=args.smoothness,
-                       head_object=args.head_object)
+                       head_object=args.head_object, drop_unseen=args.drop_unseen,
+                       conjecture_unseen=args.conjecture_unseen)
     if not args.quiet:
         print(f"retargeted {res['frames']} frames onto {res['target_object']}: {len(res['shapes_keyed'])} ARKit shapes "
               f"keyed, fit residual {res['residual_mm']['rms']:.3f} mm RMS -> {res['output']}")

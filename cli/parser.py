@@ -52,13 +52,7 @@ def _source_options(parser, what: str = "video file, image folder or glob", fram
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
 
 
-def _bake_options(parser) -> None:
-    parser.add_argument("--object", help="the head object's name (default: the only head in the file)")
-    parser.add_argument("--mode", choices=("frames", "pca"), default="frames",
-                        help="frames: one shape key per frame; pca: K eigen-deformation keys (default frames)")
-    parser.add_argument("--modes", type=int, default=8, help="number of PCA modes (default 8)")
-    parser.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
-    parser.add_argument("--head-motion", action="store_true", help="key the head motion as the object's transform")
+def _unseen_options(parser) -> None:
     unseen = parser.add_mutually_exclusive_group()
     unseen.add_argument("--drop-unseen", action="store_true",
                         help="leave out markers not seen in the neutral frame (default: refuse the take)")
@@ -66,6 +60,16 @@ def _bake_options(parser) -> None:
                         help="place markers not seen in the neutral frame (a tracker's markers first seen later) "
                              "from their neighbours' learned relations; those expected off by more than 2 mm "
                              "(3 sigma) are left out")
+
+
+def _bake_options(parser) -> None:
+    parser.add_argument("--object", help="the head object's name (default: the only head in the file)")
+    parser.add_argument("--mode", choices=("frames", "pca"), default="frames",
+                        help="frames: one shape key per frame; pca: K eigen-deformation keys (default frames)")
+    parser.add_argument("--modes", type=int, default=8, help="number of PCA modes (default 8)")
+    parser.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
+    parser.add_argument("--head-motion", action="store_true", help="key the head motion as the object's transform")
+    _unseen_options(parser)
     parser.add_argument("--no-blinks", action="store_true", help="no synthetic eyelid blinks")
     parser.add_argument("--blink-seed", type=int, default=0, help="seed of the blink process (default 0)")
     parser.add_argument("--blink-interval", type=float, default=None,
@@ -261,6 +265,7 @@ def _blender_commands(sub) -> None:
     ret.add_argument("--head-pose", help="REPORT.json of `mirrorcap track` (default: estimate the head motion)")
     ret.add_argument("--marker-map", metavar="MAP.json", help="bind markers by name (as for bake)")
     ret.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
+    _unseen_options(ret)
     ret.add_argument("--smoothness", type=float, help="temporal smoothness lambda in mm^2 (default 2)")
     ret.add_argument("--report", help="RETARGET.json to write")
     ret.add_argument("-q", "--quiet", action="store_true")

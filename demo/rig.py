@@ -172,7 +172,9 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     # 5. Blender scene, preview, report
     t0 = time.perf_counter()
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    obj = new_head_object(fitted, None, name="subject_head")
+    # the generic head's 52 ARKit expressions ride along (their offsets, as Fit Head keeps them), so
+    # fitted_head.blend can be the actor of `mirrorcap retarget`; they stay at 0 (the rest shape shows)
+    obj = new_head_object(fitted, keys, name="subject_head")
     save_blend_atomically(out_dir / "fitted_head.blend")        # for `mirrorcap bake/batch` of more takes
     bake = bake_displacements(obj, fitted.vertices, D, "frames")
     bpy.context.scene.render.fps = max(1, int(round(fps)))

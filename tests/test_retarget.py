@@ -226,3 +226,7 @@ def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):
     res = _run(["-m", "mirrorcap", "retarget", tmp_path / "holey.c3d", "--head", HEAD_BLEND, "--target", HEAD_BLEND,
                 "-o", out])
     assert res.returncode == 2 and "neutral frame" in res.stderr and not out.exists()
+    # as for bake, a tracker's late markers are dropped or placed from their neighbours on request
+    res = _run(["-m", "mirrorcap", "retarget", tmp_path / "holey.c3d", "--head", HEAD_BLEND, "--target", HEAD_BLEND,
+                "-o", out, "--conjecture-unseen"])
+    assert res.returncode == 0 and out.exists(), res.stdout + res.stderr

@@ -56,7 +56,9 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
             from ...core.retarget.arkit import arkit_basis, head_angles, solve_weights
 
             progress(0.1, "binding")
-            b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame, marker_map=mapping)
+            # markers first seen after the neutral frame: placed from their neighbours, as Bake does
+            b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame, marker_map=mapping,
+                          unseen="conjecture")
             names, basis = arkit_basis(keys, b.vertices)
             progress(0.5, "solving the ARKit weights")
             solve = solve_weights(basis, b.displacements, names, smoothness=self.smoothness)

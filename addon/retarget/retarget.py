@@ -18,7 +18,7 @@ import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.common.files import write_files_atomically
-from ...core.face.animate import head_pose_from_report
+from ...core.face.animate import head_pose_from_report, unseen_policy
 from ...core.face.bind import bind_take, load_marker_map
 from ...core.retarget.arkit import ARKIT_SHAPES, arkit_basis, head_angles, match_shape_names, solve_weights
 from ...core.retarget.livelink import livelink_csv, read_livelink_csv
@@ -100,7 +100,8 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
 
 def run_retarget(take, head_blend, target_blend, output, target_object=None, method: str = "arkit",
                  csv=None, head_pose_report=None, report=None, marker_map=None, neutral_frame: int = 0,
-                 smoothness: float | None = None, head_object=None) -> dict:
+                 smoothness: float | None = None, head_object=None, drop_unseen: bool = False,
+                 conjecture_unseen: bool = False) -> dict:
     """The whole ``mirrorcap retarget``. Every output is written only once all succeeded."""
     if method not in METHODS:
         raise InputError(f"--method must be one of {', '.join(METHODS)}")
@@ -119,7 +120,7 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     head.validate()
     shape_keys = read_shape_keys(actor)
     binding = bind_take(head, data["labels"], data["points"], neutral_frame=neutral_frame, head_pose=pose,
-                        marker_map=mapping)
+                        marker_map=mapping, unseen=unseen_policy(drop_unseen, conjecture_unseen))
     names, basis = arkit_basis(shape_keys, binding.vertices)
     t1 = time.perf_counter()
     kwargs = {} if smoothness is None else {"smoothness": smoothness}
