@@ -226,6 +226,12 @@ def bake(args) -> int:
     return 0
 
 
+def _print_missing_shapes(res) -> None:
+    if res["missing_shape_names"]:
+        print(f"  the target lacks {len(res['missing_shape_names'])} shapes (skipped): "
+              f"{', '.join(res['missing_shape_names'])}")
+
+
 def retarget(args) -> int:
     from ..addon.retarget.retarget import run_livelink, run_retarget
 
@@ -237,9 +243,7 @@ def retarget(args) -> int:
         if not args.quiet:
             print(f"keyed {res['frames']} frames of {args.take} onto {res['target_object']}: "
                   f"{len(res['shapes_keyed'])} ARKit shapes -> {res['output']}")
-            if res["missing_shape_names"]:
-                print(f"  the target lacks {len(res['missing_shape_names'])} shapes (skipped): "
-                      f"{', '.join(res['missing_shape_names'])}")
+            _print_missing_shapes(res)
         return 0
     if not args.head:
         raise MirrorCapError("--head HEAD.blend (the actor's head with the ARKit shape keys) is needed for a C3D take")
@@ -253,9 +257,7 @@ def retarget(args) -> int:
     if not args.quiet:
         print(f"retargeted {res['frames']} frames onto {res['target_object']}: {len(res['shapes_keyed'])} ARKit shapes "
               f"keyed, fit residual {res['residual_mm']['rms']:.3f} mm RMS -> {res['output']}")
-        if res["missing_shape_names"]:
-            print(f"  the target lacks {len(res['missing_shape_names'])} shapes (skipped): "
-                  f"{', '.join(res['missing_shape_names'])}")
+        _print_missing_shapes(res)
         if res["unobservable"]:
             print(f"  not observable from the markers (kept at 0): {', '.join(res['unobservable'])}")
     return 0
