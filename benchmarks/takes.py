@@ -80,25 +80,14 @@ def run_arkit_benchmark() -> dict:
     known weights, head motion, 0.1 mm noise): accuracy and the solve's time."""
     from mirrorcap.core.face.bind import bind_take
     from mirrorcap.core.face.headio import load_head_npz
-    from mirrorcap.core.retarget.arkit import apply_exclusions, arkit_basis, solve_weights
-    from mirrorcap.synthetic.headsim import head_motion, performance, place_markers
+    from mirrorcap.core.retarget.arkit import arkit_basis, solve_weights
+    from mirrorcap.synthetic.headsim import ARKIT_CHANNELS as channels
+    from mirrorcap.synthetic.headsim import arkit_take
 
     root = Path(__file__).resolve().parent.parent
     head, keys = load_head_npz(root / "sample_scenes" / "generic_head" / "head.npz", with_shape_keys=True)
-    channels = ["eyeBlinkLeft", "eyeSquintLeft", "eyeBlinkRight", "eyeSquintRight", "jawForward", "jawRight",
-                "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker", "mouthRight", "mouthSmileLeft",
-                "mouthSmileRight", "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthStretchRight",
-                "mouthRollLower", "mouthPressLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "browDownLeft",
-                "browInnerUp", "browOuterUpRight", "cheekPuff", "cheekSquintLeft", "noseSneerRight"]
     F = 1000
-    rng = np.random.default_rng(21)
-    verts, labels = place_markers(head, 150, 1)
-    _, W = performance(head, keys, F, 30.0, 21, channels={n: {n: 1.0} for n in channels})
-    W = apply_exclusions(W, channels)
-    D = np.einsum("fk,kvd->fvd", W, np.stack([keys[n] for n in channels]))
-    R, t = head_motion(F, 30.0, 10.0, 22)
-    pts = np.einsum("fij,fmj->fmi", R, head.vertices[verts][None] + D[:, verts]) + (t + [0, 0, 600.0])[:, None]
-    pts = pts + rng.normal(0, 0.1, pts.shape)
+    labels, pts, W = arkit_take(head, keys, frames=F, seed=21)
     t0 = time.perf_counter()
     b = bind_take(head, labels, pts)
     t1 = time.perf_counter()

@@ -321,11 +321,8 @@ def export(args) -> int:
 def stabilize(args) -> int:
     import numpy as np
 
-    from ..core.common.files import write_files_atomically
-    from ..core.take.c3d import c3d_bytes, read_c3d
-    from ..core.take.stabilize import stabilize as run
+    from ..core.take.stabilize import stabilize_file
 
-    take = read_c3d(args.take)
     pivot = args.pivot.strip().lower()
     if pivot not in ("auto", "none"):
         try:
@@ -338,15 +335,8 @@ def stabilize(args) -> int:
         pivot = None
     if not args.smooth >= 0:
         raise MirrorCapError("--smooth must be 0 or more seconds")
-    st = run(take["points"], take["labels"], rigid=args.rigid, method=args.method, pivot=pivot,
-             rate=take["rate"], smooth_s=args.smooth)
-    report = {"mirrorcap_version": __version__, "take": str(args.take), "units": take["units"],
-              "first_frame": take["first_frame"], "rate": take["rate"], "smooth_s": args.smooth, **st.report()}
-    files = {Path(args.output): c3d_bytes(take["labels"], st.points, take["rate"], units=take["units"],
-                                          first_frame=take["first_frame"] - 1, frame=take["frame"])}
-    if args.report:
-        files[Path(args.report)] = json.dumps(report, indent=1) + "\n"
-    write_files_atomically(files)
+    _, st, report = stabilize_file(args.take, Path(args.output), Path(args.report) if args.report else None,
+                                   rigid=args.rigid, method=args.method, pivot=pivot, smooth_s=args.smooth)
     if not args.quiet:
         piv = report["pivot_mm"]
         where = "no pivot" if piv is None else f"pivot ({piv[0]:.1f}, {piv[1]:.1f}, {piv[2]:.1f}) mm [{st.pivot_status}]"

@@ -15,6 +15,7 @@ import numpy as np
 from ..core.common.errors import InputError
 from ..core.face.head import REGIONS, HeadModel, farthest_points
 from ..core.geometry.rigid import rotation_zyx
+from ..core.retarget.arkit import apply_exclusions
 
 EXPRESSIONS = {
     "open": {"jawOpen": 0.6, "mouthLowerDownLeft": 0.3, "mouthLowerDownRight": 0.3},
@@ -125,3 +126,28 @@ def synthetic_take(head: HeadModel, shape_keys: dict, n_markers: int = 150, n_fr
     pts = np.einsum("fij,fmj->fmi", R, q) + t[:, None]
     pose = np.concatenate([R, t[:, :, None]], axis=2)
     return labels, pts, verts, disp, pose
+
+
+# ARKit shapes that move a ~150-marker layout's markers (not the eyeballs' look directions, the
+# lids' widening or the tongue), exclusive pairs taken once: the retarget tests' and benchmark's channels
+ARKIT_CHANNELS = ["eyeBlinkLeft", "eyeSquintLeft", "eyeBlinkRight", "eyeSquintRight", "jawForward", "jawRight",
+                  "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker", "mouthRight", "mouthSmileLeft",
+                  "mouthSmileRight", "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthStretchRight",
+                  "mouthRollLower", "mouthPressLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "browDownLeft",
+                  "browInnerUp", "browOuterUpRight", "cheekPuff", "cheekSquintLeft", "noseSneerRight"]
+
+
+def arkit_take(head: HeadModel, shape_keys: dict, channels=ARKIT_CHANNELS, frames: int = 300, noise: float = 0.1,
+               seed: int = 2, still: bool = False, fps: float = 30.0):
+    """A ~150-marker take ``labels, points (F, M, 3)`` of a performance with known ARKit weights
+    ``(F, C)`` (one channel per shape, the exclusive pairs and ``mouthClose <= jawOpen``
+    respected; ``still``: the neutral held), the head moving 10 deg, ``noise`` mm per coordinate."""
+    rng = np.random.default_rng(seed)
+    verts, labels = place_markers(head, 150, 1)
+    _, W = performance(head, shape_keys, frames, fps, seed, channels={n: {n: 1.0} for n in channels})
+    W = np.zeros_like(W) if still else apply_exclusions(W, channels)
+    D = np.einsum("fk,kvd->fvd", W, np.stack([shape_keys[n] for n in channels]))
+    R, t = head_motion(frames, fps, 10.0, seed + 1)
+    q = head.vertices[verts][None] + D[:, verts]
+    pts = np.einsum("fij,fmj->fmi", R, q) + (t + [0.0, 0.0, 600.0])[:, None] + rng.normal(0, noise, (frames, 150, 3))
+    return labels, pts, W

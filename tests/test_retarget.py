@@ -16,14 +16,14 @@ import pytest
 from conftest import ROOT
 
 from mirrorcap.core.common.errors import InputError
-from mirrorcap.core.face.bind import bind_take
 from mirrorcap.core.face.headfit import subdivide
 from mirrorcap.core.face.headio import load_head_npz, save_head_npz
 from mirrorcap.core.face.head import HeadModel
-from mirrorcap.core.retarget.arkit import ARKIT_SHAPES, apply_exclusions, arkit_basis, match_shape_names, solve_weights
+from mirrorcap.core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take
 from mirrorcap.core.retarget.livelink import BLEND_SHAPE_COUNT, HEADER, livelink_csv, read_livelink_csv, timecode
 from mirrorcap.core.take.c3d import write_c3d
-from mirrorcap.synthetic.headsim import head_motion, performance, place_markers
+from mirrorcap.synthetic.headsim import ARKIT_CHANNELS as CHANNELS
+from mirrorcap.synthetic.headsim import arkit_take
 
 HEAD_NPZ = ROOT / "sample_scenes" / "generic_head" / "head.npz"
 HEAD_BLEND = ROOT / "sample_scenes" / "generic_head" / "head.blend"
@@ -38,36 +38,13 @@ APP_HEADER = (
     "MouthUpperUpRight,BrowDownLeft,BrowDownRight,BrowInnerUp,BrowOuterUpLeft,BrowOuterUpRight,CheekPuff,"
     "CheekSquintLeft,CheekSquintRight,NoseSneerLeft,NoseSneerRight,TongueOut,HeadYaw,HeadPitch,HeadRoll,"
     "LeftEyeYaw,LeftEyePitch,LeftEyeRoll,RightEyeYaw,RightEyePitch,RightEyeRoll")
-# shapes that move the markers (not the eyeballs' look directions, the lids' widening or the tongue)
-CHANNELS = ["eyeBlinkLeft", "eyeSquintLeft", "eyeBlinkRight", "eyeSquintRight", "jawForward", "jawRight", "jawOpen",
-            "mouthClose", "mouthFunnel", "mouthPucker", "mouthRight", "mouthSmileLeft", "mouthSmileRight",
-            "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthStretchRight", "mouthRollLower",
-            "mouthPressLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "browDownLeft", "browInnerUp",
-            "browOuterUpRight", "cheekPuff", "cheekSquintLeft", "noseSneerRight"]
-
-
 @pytest.fixture(scope="module")
 def head_and_keys():
     return load_head_npz(HEAD_NPZ, with_shape_keys=True)
 
 
-def _take(head, keys, channels=CHANNELS, frames=300, noise=0.1, seed=2, still=False):
-    """A ~150-marker take of a performance with known ARKit weights, the head moving."""
-    rng = np.random.default_rng(seed)
-    verts, labels = place_markers(head, 150, 1)
-    _, W = performance(head, keys, frames, 30.0, seed, channels={n: {n: 1.0} for n in channels})
-    W = np.zeros_like(W) if still else apply_exclusions(W, channels)
-    D = np.einsum("fk,kvd->fvd", W, np.stack([keys[n] for n in channels]))
-    R, t = head_motion(frames, 30.0, 10.0, seed + 1)
-    q = head.vertices[verts][None] + D[:, verts]
-    pts = np.einsum("fij,fmj->fmi", R, q) + (t + [0.0, 0.0, 600.0])[:, None] + rng.normal(0, noise, (frames, 150, 3))
-    return labels, pts, W
-
-
 def _solve(head, keys, labels, pts):
-    b = bind_take(head, labels, pts)
-    names, B = arkit_basis(keys, b.vertices)
-    return solve_weights(B, b.displacements, names)
+    return retarget_take(head, keys, labels, pts)[1]
 
 
 def _full(W, channels, names):
@@ -80,7 +57,7 @@ def _full(W, channels, names):
 def test_arkit_weights_are_recovered_from_a_marker_take(head_and_keys):
     """27 channels, head motion, 0.1 mm noise, 150 markers: RMS <= 0.05, max <= 0.2."""
     head, keys = head_and_keys
-    labels, pts, W = _take(head, keys, seed=12)       # the solver's defaults were set on seeds 2-8
+    labels, pts, W = arkit_take(head, keys, seed=12)       # the solver's defaults were set on seeds 2-8
     sol = _solve(head, keys, labels, pts)
     truth = _full(W, CHANNELS, sol.names)
     err = sol.weights - truth
@@ -97,7 +74,7 @@ def test_arkit_weights_are_recovered_from_a_marker_take(head_and_keys):
 def test_left_expressions_do_not_leak_right_and_a_held_neutral_is_still(head_and_keys):
     head, keys = head_and_keys
     left = [n for n in CHANNELS if n.endswith("Left")]
-    labels, pts, W = _take(head, keys, channels=left, frames=150, seed=14)
+    labels, pts, W = arkit_take(head, keys, channels=left, frames=150, seed=14)
     sol = _solve(head, keys, labels, pts)
     right = [sol.names.index(n.replace("Left", "Right")) for n in left]
     assert np.abs(sol.weights[:, right]).max() < 0.05
@@ -106,7 +83,7 @@ def test_left_expressions_do_not_leak_right_and_a_held_neutral_is_still(head_and
     # single value, 0.21 on this take, is eyeBlinkLeft: the markers avoid the lids, so a blink is seen
     # only through its neighbours; README.)
     assert np.sqrt(np.mean(err ** 2)) <= 0.05
-    labels, pts, _ = _take(head, keys, frames=90, seed=15, still=True)
+    labels, pts, _ = arkit_take(head, keys, frames=90, seed=15, still=True)
     sol = _solve(head, keys, labels, pts)
     print(f"left-only: right max {np.abs(sol.weights[:, right]).max():.3f}; neutral: jitter (sd) "
           f"{sol.weights.std(axis=0).max():.4f}, max {sol.weights.max():.3f}")
@@ -165,7 +142,7 @@ def _character(head, keys, tmp_path):
 
 def test_retarget_command_onto_another_character(tmp_path, head_and_keys):
     head, keys = head_and_keys
-    labels, pts, W = _take(head, keys, frames=60, seed=6)
+    labels, pts, W = arkit_take(head, keys, frames=60, seed=6)
     write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
     char, keys2 = _character(head, keys, tmp_path)
     out = tmp_path / "out.blend"
@@ -208,7 +185,7 @@ def test_retarget_command_onto_another_character(tmp_path, head_and_keys):
 
 def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):
     head, keys = head_and_keys
-    labels, pts, _ = _take(head, keys, frames=10, seed=7)
+    labels, pts, _ = arkit_take(head, keys, frames=10, seed=7)
     write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
     holey = pts.copy()
     holey[0, 5] = np.nan

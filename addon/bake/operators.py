@@ -11,7 +11,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from ...core.common.errors import InputError
-from ..common.inputs import head_object_from, input_path, required, scene_settings
+from ..common.inputs import head_object_from, input_path, required, scene_settings, selected_marker_labels
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
 from ..common.properties import BAKE_MODES
 
@@ -59,8 +59,7 @@ class MIRRORCAP_OT_map_marker(MirrorCapOperator):
         path = required(input_path(s.marker_map, must_exist=False), "marker map file (MAP.json)")
         if not Path(path).parent.is_dir():
             raise InputError(f"the marker map's folder {path.parent} does not exist (save the .blend first for // paths)")
-        labels = [self.label] if self.label else [str(o["mirrorcap_label"]) for o in context.selected_objects
-                                                  if "mirrorcap_label" in o]
+        labels = [self.label] if self.label else selected_marker_labels(context)
         if len(labels) != 1:
             raise InputError(f"select one marker empty (an imported take's) or give its label; {len(labels)} selected")
         label = labels[0]

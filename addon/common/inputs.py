@@ -25,6 +25,11 @@ def input_path(value: str, fallback: str = "", what: str = "file", must_exist: b
     return path
 
 
+def selected_marker_labels(context) -> list:
+    """The labels (``mirrorcap_label``) of the selected marker empties of imported takes."""
+    return [str(o["mirrorcap_label"]) for o in context.selected_objects if "mirrorcap_label" in o]
+
+
 def required(path, what: str):
     if path is None:
         raise InputError(f"choose the {what} first")

@@ -52,18 +52,15 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         self._target, self._csv, self._rate = target.name, csv, data["rate"]
 
         def work(progress):
-            from ...core.face.bind import bind_take
-            from ...core.retarget.arkit import arkit_basis, head_angles, solve_weights
+            from ...core.retarget.arkit import retarget_take
 
-            progress(0.1, "binding")
+            progress(0.1, "binding and solving the ARKit weights")
             # markers first seen after the neutral frame: placed from their neighbours, as Bake does
-            b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame, marker_map=mapping,
-                          unseen="conjecture")
-            names, basis = arkit_basis(keys, b.vertices)
-            progress(0.5, "solving the ARKit weights")
-            solve = solve_weights(basis, b.displacements, names, smoothness=self.smoothness)
+            _, solve, angles = retarget_take(head, keys, data["labels"], data["points"],
+                                             neutral_frame=self.neutral_frame, marker_map=mapping,
+                                             unseen="conjecture", smoothness=self.smoothness)
             progress(0.95, "keying")
-            return solve, head_angles(b.head_motion[0], head.face_axes())
+            return solve, angles
 
         return work
 

@@ -19,8 +19,8 @@ import numpy as np
 from ...core.common.errors import InputError
 from ...core.common.files import write_files_atomically
 from ...core.face.animate import head_pose_from_report, unseen_policy
-from ...core.face.bind import bind_take, load_marker_map
-from ...core.retarget.arkit import ARKIT_SHAPES, arkit_basis, head_angles, match_shape_names, solve_weights
+from ...core.face.bind import load_marker_map
+from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take
 from ...core.retarget.livelink import livelink_csv, read_livelink_csv
 from ...core.take.c3d import read_c3d
 from ..common.headio import find_head_object, open_blend, read_head, read_shape_keys, save_blend_atomically
@@ -119,17 +119,14 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     head = read_head(actor)
     head.validate()
     shape_keys = read_shape_keys(actor)
-    binding = bind_take(head, data["labels"], data["points"], neutral_frame=neutral_frame, head_pose=pose,
-                        marker_map=mapping, unseen=unseen_policy(drop_unseen, conjecture_unseen))
-    names, basis = arkit_basis(shape_keys, binding.vertices)
     t1 = time.perf_counter()
-    kwargs = {} if smoothness is None else {"smoothness": smoothness}
-    solve = solve_weights(basis, binding.displacements, names, **kwargs)
+    binding, solve, angles = retarget_take(head, shape_keys, data["labels"], data["points"],
+                                           neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
+                                           unseen=unseen_policy(drop_unseen, conjecture_unseen), smoothness=smoothness)
     t2 = time.perf_counter()
-    angles = head_angles(binding.head_motion[0], head.face_axes())
     open_blend(target_blend)
     target = find_target_object(target_object)
-    keyed = key_weights(target, names, solve.weights)
+    keyed = key_weights(target, solve.names, solve.weights)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, F
     scene.render.fps = max(1, int(round(data["rate"])))
@@ -138,11 +135,11 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
               "rate": data["rate"], "markers": len(binding.labels), "registration": binding.registration,
               "landmark_rms_mm": binding.landmark_rms_mm, "solve_iterations": solve.iterations,
               "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"], **solve.report(),
-              "timings_s": {"bind_s": t1 - t0, "solve_s": t2 - t1}}
+              "timings_s": {"read_s": t1 - t0, "bind_and_solve_s": t2 - t1}}
     save_blend_atomically(output)
     files = {}
     if csv is not None:
-        files[Path(csv)] = livelink_csv(solve.weights, names, data["rate"], head=angles)
+        files[Path(csv)] = livelink_csv(solve.weights, solve.names, data["rate"], head=angles)
     result["timings_s"]["total_s"] = time.perf_counter() - t0
     if report is not None:
         files[Path(report)] = json.dumps(result, indent=1) + "\n"

@@ -10,7 +10,8 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ...core.common.errors import InputError
-from ..common.inputs import input_path, required, rig_and_colours, rigid_from_settings, scene_settings, take_report_path
+from ..common.inputs import (input_path, required, rig_and_colours, rigid_from_settings, scene_settings,
+                             selected_marker_labels, take_report_path)
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
 
 
@@ -172,12 +173,6 @@ STABILIZE_METHODS = [("invariants", "Invariants", "eq. 1-3 of Huang, Lin & Ouhyo
 PIVOT_MODES = [("auto", "Auto", "estimate the rotation pivot (eq. 4-8)"), ("none", "None", "no pivot")]
 
 
-def _selected_marker_labels(context) -> list:
-    """The labels of the selected marker empties (``mirrorcap_label``), active one last."""
-    objs = [o for o in context.selected_objects if "mirrorcap_label" in o]
-    return [str(o["mirrorcap_label"]) for o in objs]
-
-
 class MIRRORCAP_OT_stabilize_take(MirrorCapOperator):
     """Remove the head motion from a C3D take (any system's): rigid markers, rotation pivot, every marker in the head frame of the first frame"""
 
@@ -195,11 +190,7 @@ class MIRRORCAP_OT_stabilize_take(MirrorCapOperator):
     import_result: BoolProperty(name="Import", default=True, description="add the stabilised take and its pivot")
 
     def run(self, context):
-        import json
-
-        from ...core.common.files import write_files_atomically
-        from ...core.take.c3d import c3d_bytes, read_c3d
-        from ...core.take.stabilize import stabilize
+        from ...core.take.stabilize import stabilize_file
         from ..common.take_io import import_take
 
         s = scene_settings(context)
@@ -207,16 +198,9 @@ class MIRRORCAP_OT_stabilize_take(MirrorCapOperator):
         out = required(input_path(self.output, s.stable_take, must_exist=False), "output take (OUT.c3d)")
         if not out.parent.is_dir():
             raise InputError(f"the output's folder {out.parent} does not exist (save the .blend first for // paths)")
-        labels = (self.rigid or s.rigid_labels).replace(",", " ").split() or _selected_marker_labels(context) or None
-        take = read_c3d(src)
-        st = stabilize(take["points"], take["labels"], rigid=labels, method=self.method,
-                       pivot="auto" if self.pivot == "auto" else None, rate=take["rate"], smooth_s=self.smooth_s)
-        report = {"take": str(src), "units": take["units"], "first_frame": take["first_frame"], "rate": take["rate"],
-                  "smooth_s": self.smooth_s, **st.report()}
-        write_files_atomically({
-            out: c3d_bytes(take["labels"], st.points, take["rate"], units=take["units"],
-                           first_frame=take["first_frame"] - 1, frame=take["frame"]),
-            out.with_suffix(".json"): json.dumps(report, indent=1) + "\n"})
+        labels = (self.rigid or s.rigid_labels).replace(",", " ").split() or selected_marker_labels(context) or None
+        take, st, _ = stabilize_file(src, out, out.with_suffix(".json"), rigid=labels, method=self.method,
+                                     pivot="auto" if self.pivot == "auto" else None, smooth_s=self.smooth_s)
         if self.import_result:
             stable = dict(take, points=st.points, gaps=~np.all(np.isfinite(st.points), axis=2))
             parent = import_take(context, out, data=stable)

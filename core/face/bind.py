@@ -169,7 +169,7 @@ class Binding:
     conjectured_neutral: list = field(default_factory=list)  # labels bound from a conjectured neutral position
 
 
-MAP_RIGID, MAP_UNMAPPED = -2, -1
+MAP_UNMAPPED, MAP_RIGID, MAP_IGNORE = -1, -2, -3   # marker roles besides a vertex index
 
 
 def load_marker_map(path) -> dict:
@@ -192,7 +192,7 @@ def load_marker_map(path) -> dict:
 def resolve_marker_map(marker_map: dict, labels, head: HeadModel) -> np.ndarray:
     """Each marker's role as ``(M,)`` ints: its head vertex (>= 0), :data:`MAP_RIGID` (a marker
     on a rigid part such as a headband: it carries the head motion and is not bound), or
-    :data:`MAP_UNMAPPED`; ``"ignore"`` gives -3 (left out). One message for labels the take
+    :data:`MAP_UNMAPPED`, or :data:`MAP_IGNORE` (left out). One message for labels the take
     does not have, landmarks the head does not have, vertices out of range, or two markers
     on one vertex."""
     labels = list(labels)
@@ -207,7 +207,7 @@ def resolve_marker_map(marker_map: dict, labels, head: HeadModel) -> np.ndarray:
         if role == "rigid":
             roles[i] = MAP_RIGID
         elif role == "ignore":
-            roles[i] = -3
+            roles[i] = MAP_IGNORE
         elif isinstance(role, str):
             if role[3:] not in lms:
                 raise InputError(f"the marker map puts {label!r} on {role!r}, which the head does not have "
@@ -263,7 +263,7 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     roles = np.full(M, MAP_UNMAPPED, np.int64)
     if marker_map:
         roles = resolve_marker_map(marker_map, labels, head)
-        keep = roles != -3
+        keep = roles != MAP_IGNORE
         p, labels, roles = p[:, keep], [s for s, k in zip(labels, keep) if k], roles[keep]
         F, M, _ = p.shape
     valid = np.all(np.isfinite(p), axis=2)
@@ -327,10 +327,9 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         M = len(labels)
         if M == 0:
             raise InputError("the marker map leaves no marker to bind: every marker is rigid or ignored")
-    by_label = [lms.get(_landmark_of(s, lms)) if _landmark_of(s, lms) else None for s in labels]
-    anchor = [(i, int(r) if r >= 0 else by_label[i]) for i, r in enumerate(roles)]
-    anchor = [(i, v) for i, v in anchor if v is not None]
-    pairs = [(i, _landmark_of(labels[i], lms) or f"vertex {v}") for i, v in anchor]
+    named = [_landmark_of(s, lms) for s in labels]        # a label naming a landmark anchors it
+    anchor = [(i, int(r) if r >= 0 else lms[named[i]]) for i, r in enumerate(roles) if r >= 0 or named[i]]
+    pairs = [(i, named[i] or f"vertex {v}") for i, v in anchor]
     if len(anchor) >= 3:
         idx = np.array([i for i, _ in anchor])
         target = head.vertices[[v for _, v in anchor]]

@@ -135,6 +135,21 @@ def apply_exclusions(weights, names) -> np.ndarray:
     return W
 
 
+def retarget_take(head, shape_keys: dict, labels, points, *, neutral_frame: int = 0, head_pose=None,
+                  marker_map: dict | None = None, unseen: str = "error", smoothness: float | None = None):
+    """A take to ARKit weights: bind it to the actor's ``head`` (:func:`..face.bind.bind_take`),
+    take the ARKit ``shape_keys`` at the bound vertices, solve (:func:`solve_weights`) and the
+    head's yaw, pitch and roll (:func:`head_angles`). Returns ``(binding, solve, angles)``."""
+    from ..face.bind import bind_take
+
+    binding = bind_take(head, labels, points, neutral_frame=neutral_frame, head_pose=head_pose,
+                        marker_map=marker_map, unseen=unseen)
+    names, basis = arkit_basis(shape_keys, binding.vertices)
+    solve = solve_weights(basis, binding.displacements, names,
+                          **({} if smoothness is None else {"smoothness": smoothness}))
+    return binding, solve, head_angles(binding.head_motion[0], head.face_axes())
+
+
 def match_shape_names(target_names, names) -> tuple[dict, list]:
     """``{solved name: target key name}`` matched case-insensitively, and the solved names the
     target lacks."""

@@ -121,18 +121,24 @@ def write_c3d(path, labels, points, rate: float, **kwargs) -> None:
     write_files_atomically({path: c3d_bytes(labels, points, rate, **kwargs)})
 
 
-def _check_structure(path: Path, raw: bytes) -> str:
+def _check_structure(path: Path) -> str:
     """One clear error for a file that is not a complete C3D file (before ezc3d sees it:
-    ezc3d can hang on a file cut inside its parameter section). Returns the processor."""
-    if len(raw) < BLOCK or raw[1] != 0x50 or raw[0] < 2:
-        raise InputError(f"{path} is not a C3D file")
-    pstart = (raw[0] - 1) * BLOCK
-    if pstart + 4 > len(raw):
+    ezc3d can hang on a file cut inside its parameter section). Reads the header and the
+    parameter section's first 4 bytes only. Returns the processor."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        raw = fh.read(BLOCK)
+        if len(raw) < BLOCK or raw[1] != 0x50 or raw[0] < 2:
+            raise InputError(f"{path} is not a C3D file")
+        pstart = (raw[0] - 1) * BLOCK
+        fh.seek(pstart)
+        section = fh.read(4)
+    if len(section) < 4:
         raise InputError(f"{path}: the C3D file is truncated (its parameter section is missing)")
-    processor = raw[pstart + 3]
+    processor = section[3]
     if processor not in PROCESSORS:
         raise InputError(f"{path} is not a C3D file (unknown processor type {processor})")
-    if pstart + raw[pstart + 2] * BLOCK > len(raw):
+    if pstart + section[2] * BLOCK > size:
         raise InputError(f"{path}: the C3D file is truncated inside its parameter section")
     big = processor == 86
     words = struct.unpack((">" if big else "<") + "10H", raw[:20])
@@ -141,7 +147,7 @@ def _check_structure(path: Path, raw: bytes) -> str:
     item = 4 if scale_sign & 0x80 else 2
     n_frames = max(last - first + 1, 0)
     need = (data_start - 1) * BLOCK + n_frames * (4 * n_points + analog_per_frame) * item
-    if data_start < 2 or need > len(raw):
+    if data_start < 2 or need > size:
         raise InputError(f"{path}: the C3D file is truncated: its header promises {n_frames} frames of "
                          f"{n_points} markers, the data section holds fewer")
     return PROCESSORS[processor]
@@ -171,6 +177,17 @@ def _parameter(params, group, name, default=None):
         return default
 
 
+def _chunked_labels(params, group) -> list:
+    """``group:LABELS`` followed by ``LABELS2``, ``LABELS3``, ... (255 labels per chunk)."""
+    labels = []
+    for i in range(1, 1000):
+        chunk = _parameter(params, group, "LABELS" if i == 1 else f"LABELS{i}")
+        if chunk is None:
+            break
+        labels += [str(s) for s in chunk]
+    return labels
+
+
 def read_c3d(path) -> dict:
     """Read any C3D file ezc3d reads.
 
@@ -185,8 +202,7 @@ def read_c3d(path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"take {path} does not exist")
-    raw = path.read_bytes()
-    processor = _check_structure(path, raw)
+    processor = _check_structure(path)
     if processor == "MIPS":
         raise InputError(f"{path}: a MIPS (big-endian) C3D file, which ezc3d 1.7 does not read; convert it to the "
                          "Intel or DEC format (e.g. with Motion Lab Systems' C3Deditor) and try again")
@@ -196,12 +212,7 @@ def read_c3d(path) -> dict:
     except (OSError, ValueError, RuntimeError, IndexError) as exc:
         raise InputError(f"{path}: not a readable C3D file ({exc})") from None
     params = c["parameters"]
-    labels = []
-    for i in range(1, 1000):
-        chunk = _parameter(params, "POINT", "LABELS" if i == 1 else f"LABELS{i}")
-        if chunk is None:
-            break
-        labels += [str(s) for s in chunk]
+    labels = _chunked_labels(params, "POINT")
     data = np.asarray(c["data"]["points"], float)                 # (4, M, F)
     n_points = data.shape[1]
     labels = (labels + [""] * n_points)[:n_points]
@@ -216,19 +227,14 @@ def read_c3d(path) -> dict:
     residual = residual[0].T if residual.size else np.zeros(pts.shape[:2])
     gaps = ~np.all(np.isfinite(pts), axis=2) | np.all(pts == 0.0, axis=2) | (residual < 0)
     pts[gaps] = np.nan
-    analog_labels = []
-    for i in range(1, 1000):
-        chunk = _parameter(params, "ANALOG", "LABELS" if i == 1 else f"LABELS{i}")
-        if chunk is None:
-            break
-        analog_labels += [str(s).strip() for s in chunk]
-    n_analog = int(np.asarray(c["data"]["analogs"]).shape[1]) if np.asarray(c["data"]["analogs"]).ndim == 3 else 0
+    analog_labels = [s.strip() for s in _chunked_labels(params, "ANALOG")]
+    analogs = np.asarray(c["data"]["analogs"])
+    n_analog = int(analogs.shape[1]) if analogs.ndim == 3 else 0
     header = c["header"]
     # residual exactly 0 marks a conjectured marker in MirrorCap's takes; other writers leave it 0 freely
     conjectured = (residual == 0) & ~gaps if "MIRRORCAP" in params else np.zeros_like(gaps)
-    frame_text = _parameter(params, "MIRRORCAP", "FRAME", [""])
-    frame = "camera" if "MIRRORCAP" in params and str(frame_text[0] if len(frame_text) else "").startswith("camera") \
-        else "lab"
+    frame_text = list(_parameter(params, "MIRRORCAP", "FRAME", None) or [""])
+    frame = "camera" if str(frame_text[0]).startswith("camera") else "lab"
     return {"labels": labels, "points": pts, "conjectured": conjectured, "gaps": gaps, "frame": frame,
             "rate": float(header["points"]["frame_rate"]), "units": "rel" if key == "rel" else "mm",
             "source_units": source_units or "mm (not given)", "first_frame": int(header["points"]["first_frame"]) + 1,

@@ -29,6 +29,7 @@ Units: the take's, converted to millimetres by :func:`..take.c3d.read_c3d`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import combinations
 
 import numpy as np
 
@@ -73,7 +74,6 @@ class Stabilization:
     pivot_undetermined_axis: list | None = None
     pivot_objective: float | None = None
     pivot_iterations: int = 0
-    pivot_rounds: int = 0
     sway_mm: np.ndarray | None = None     # (F, 3) the pivot's own motion: R_f O + t_f - O
     warnings: list = field(default_factory=list)
 
@@ -84,7 +84,6 @@ class Stabilization:
                "pivot_mm": None if self.pivot_mm is None else [round(float(v), 4) for v in self.pivot_mm],
                "pivot_status": self.pivot_status, "pivot_undetermined_axis": self.pivot_undetermined_axis,
                "pivot_objective": self.pivot_objective, "pivot_iterations": self.pivot_iterations,
-               "pivot_rounds": self.pivot_rounds,
                "frames_without_pose": int(np.sum(self.pose_source == "none")),
                "frames_posed_with_pivot": int(np.sum(self.pose_source == "rigid+pivot")),
                "rigid_residual_rms_mm": rms,
@@ -101,7 +100,7 @@ class Stabilization:
         return rep
 
 
-def motion_by_invariants(ref, cur, weights=None):
+def motion_by_invariants(ref, cur):
     """``R (F, 3, 3), t (F, 3)`` by the translation invariants of eq. 1-3.
 
     Three points (the paper's case): ``m_1 = (p_2 - p_1)/|.|``, ``m_2 = (p_3 - p_2)/|.|``, the
@@ -109,13 +108,12 @@ def motion_by_invariants(ref, cur, weights=None):
     for each row of ``R`` (eq. 3). More points (the rigid markers and the pivot, section
     2.3): every edge between two points is an invariant ``m``, and eq. 3 is solved in the
     least-squares sense, each edge weighted by its length (its direction is that much
-    more precise) and by ``weights (F, n)`` of its ends (0 for a missing point). With noise
+    more precise). With noise
     the solution is not exactly a rotation: it is replaced by the nearest rotation (SVD).
     ``t`` then follows from eq. 1, averaged over the points. ``ref (n, 3)``, ``cur (F, n, 3)``."""
     ref = np.asarray(ref, float)
     cur = np.asarray(cur, float)
-    F, n = cur.shape[:2]
-    w = np.ones((F, n)) if weights is None else np.asarray(weights, float)
+    n = cur.shape[1]
     if n == 3:
         pairs = np.array([[0, 1], [1, 2]])
     else:
@@ -129,22 +127,20 @@ def motion_by_invariants(ref, cur, weights=None):
     m3p = np.cross(mp[:, 0], mp[:, 1])
     m = np.vstack([m, m3 / np.linalg.norm(m3)])
     mp = np.concatenate([mp, (m3p / np.maximum(np.linalg.norm(m3p, axis=1, keepdims=True), 1e-12))[:, None]], axis=1)
-    we = w[:, pairs[:, 0]] * w[:, pairs[:, 1]] * length        # (F, k)
-    we = np.concatenate([we, (we[:, :1] * we[:, 1:2] > 0) * length[:2].mean()], axis=1)
+    we = np.r_[length, length[:2].mean()]                     # the pseudo-vector: its two edges' mean
     # eq. 3 per frame, weighted least squares: (M^T W M) R^T = M^T W M'
-    A = np.einsum("ki,fk,kj->fij", m, we, m)
-    B = np.einsum("ki,fk,fkj->fij", m, we, mp)
-    R = np.swapaxes(np.linalg.solve(A, B), 1, 2)
+    A = np.einsum("ki,k,kj->ij", m, we, m)
+    B = np.einsum("ki,k,fkj->fij", m, we, mp)
+    R = np.swapaxes(np.linalg.solve(A[None], B), 1, 2)
     U, _, Vt = np.linalg.svd(R)
     D = np.ones(R.shape[:-1])
     D[:, 2] = np.sign(np.linalg.det(U @ Vt))
     R = (U * D[:, None, :]) @ Vt
-    wn = w / w.sum(1, keepdims=True)
-    t = np.einsum("fn,fnc->fc", wn, np.where(w[..., None] > 0, cur, 0.0) - ref @ np.swapaxes(R, 1, 2))  # eq. 1
+    t = np.mean(cur - ref @ np.swapaxes(R, 1, 2), axis=1)     # eq. 1 by substitution
     return R, t
 
 
-def pivot_objective(candidates, rigid, reference=None, guess=None, weights=PIVOT_WEIGHTS,
+def pivot_objective(candidates, rigid, guess=None, weights=PIVOT_WEIGHTS,
                     pull_mm: float = PIVOT_PULL_MM):
     """Eq. 5 for pivot candidates ``(K, 3)`` (fixed in the take's coordinates) over the rigid
     markers' tracks ``rigid (F, n, 3)`` (complete frames only):
@@ -258,8 +254,7 @@ def _least_deforming(points, valid, ref_frame, count):
 
 def _widest_triangle(ref):
     """Indices of the three points spanning the largest triangle (the best-conditioned eq. 3)."""
-    n = len(ref)
-    i, j, k = np.array([(a, b, c) for a in range(n) for b in range(a + 1, n) for c in range(b + 1, n)]).T
+    i, j, k = np.array(list(combinations(range(len(ref)), 3))).T
     area = np.linalg.norm(np.cross(ref[j] - ref[i], ref[k] - ref[i]), axis=1)
     best = int(np.argmax(area))
     return [int(i[best]), int(j[best]), int(k[best])], float(area[best]) / 2
@@ -282,6 +277,7 @@ def stabilize(points, labels, rigid=None, method: str = "invariants", pivot="aut
     if method not in ("invariants", "arun"):
         raise InputError(f"unknown method {method!r} (invariants or arun)")
     F, M = pts.shape[:2]
+    fps = rate or 60.0
     valid = np.all(np.isfinite(pts), axis=2)
     warnings = []
     if rigid is not None:
@@ -322,7 +318,7 @@ def stabilize(points, labels, rigid=None, method: str = "invariants", pivot="aut
                        rigid=[labels[i] for i in idx], rigid_source=source, method=method, reference_frame=ref,
                        rigid_residual_mm=np.full(F, np.nan), warnings=warnings)
     # the rotation pivot (eq. 4-8), then the motion again with the pivot as a fourth rigid point (section 2.3)
-    centre = None
+    centre = centre_for_motion = None
     if isinstance(pivot, str) and pivot == "auto":
         vals, vecs = _rotation_spread(R[ok])
         limit = 2.0 * (1 - np.cos(np.radians(MIN_PIVOT_ROTATION_DEG)))
@@ -356,16 +352,15 @@ def stabilize(points, labels, rigid=None, method: str = "invariants", pivot="aut
         sway = R @ centre + t - centre
         frames = np.arange(F)
         sway = np.stack([np.interp(frames, frames[ok], sway[ok, c]) for c in range(3)], axis=1)
-        sway = _local_quadratic(sway, SWAY_SMOOTHING_S * (rate if rate else 60.0))
+        sway = _local_quadratic(sway, SWAY_SMOOTHING_S * fps)
         if centre_for_motion is not None:
             R2, t2, ok2 = _motion(structure, pts, valid, idx, tri, method, pivot=(centre, sway))
             st.pose_source = np.where(ok2, np.where(ok, "rigid", "rigid+pivot"), "none").astype(object)
             st.rotation, st.translation, ok = R2, t2, ok2
-            st.pivot_rounds = 1
         st.sway_mm = np.where(ok[:, None], sway, np.nan)
     if smooth_s > 0:
-        _smooth_pose(st, ok, centre if centre is not None else np.mean(ref_rigid, axis=0), smooth_s * (rate or 60.0),
-                     REFERENCE_SMOOTHING_S * (rate or 60.0))
+        _smooth_pose(st, ok, centre if centre is not None else np.mean(ref_rigid, axis=0), smooth_s * fps,
+                     REFERENCE_SMOOTHING_S * fps)
     # the motion from the reference frame: p(f) = R_f R_ref^T (p(ref) - t_ref) + t_f
     R = st.rotation @ st.rotation[ref].T
     t = st.translation - R @ st.translation[ref]
@@ -384,12 +379,40 @@ def stabilize(points, labels, rigid=None, method: str = "invariants", pivot="aut
     return st
 
 
+def stabilize_file(take_path, output, report=None, *, rigid=None, method: str = "invariants", pivot="auto",
+                   smooth_s: float = 0.2) -> tuple[dict, Stabilization, dict]:
+    """``mirrorcap stabilize`` and the Stabilize operator: read ``take_path``, stabilise it
+    (:func:`stabilize`), write ``output`` (C3D, same labels, rate, first frame and axes) and
+    ``report`` (JSON) atomically. Returns the take as read, the stabilisation and the report."""
+    import json
+
+    from .. import __version__
+    from ..common.files import write_files_atomically
+    from .c3d import c3d_bytes, read_c3d
+
+    take = read_c3d(take_path)
+    st = stabilize(take["points"], take["labels"], rigid=rigid, method=method, pivot=pivot, rate=take["rate"],
+                   smooth_s=smooth_s)
+    rep = {"mirrorcap_version": __version__, "take": str(take_path), "units": take["units"],
+           "first_frame": take["first_frame"], "rate": take["rate"], "smooth_s": smooth_s, **st.report()}
+    files = {output: c3d_bytes(take["labels"], st.points, take["rate"], units=take["units"],
+                               first_frame=take["first_frame"] - 1, frame=take["frame"])}
+    if report is not None:
+        files[report] = json.dumps(rep, indent=1) + "\n"
+    write_files_atomically(files)
+    return take, st, rep
+
+
+def _odd_window(window_frames: float, n: int) -> int:
+    """The Savitzky-Golay window for ``window_frames``: odd, at most ``n``."""
+    return min(int(round(window_frames)) // 2 * 2 + 1, n if n % 2 else n - 1)
+
+
 def _local_quadratic(values, window_frames: float):
     """``values (F, k)`` fitted by a local quadratic over ``window_frames`` (Savitzky-Golay;
     it keeps a signal's slope and curvature, also at the first and last frames, where a
-    plain average would pull it towards the inside)."""
-    n = len(values)
-    window = min(int(round(window_frames)) // 2 * 2 + 1, n if n % 2 else n - 1)
+    plain average would pull it towards the inside); unchanged when under 5 frames."""
+    window = _odd_window(window_frames, len(values))
     if window < 5:
         return values
     return savgol_filter(values, window, 2, axis=0, mode="interp")
@@ -406,22 +429,18 @@ def _smooth_pose(st: Stabilization, ok, centre, window_frames: float, reference_
     from scipy.spatial.transform import Rotation
 
     n = int(ok.sum())
-
-    def odd(w):
-        return min(int(round(w)) // 2 * 2 + 1, n if n % 2 else n - 1)
-
-    window, ref_window = odd(window_frames), odd(max(reference_window_frames, window_frames))
-    if window < 5:
+    reference_window_frames = max(reference_window_frames, window_frames)
+    if _odd_window(window_frames, n) < 5:
         return
     R, t = st.rotation[ok], st.translation[ok]
     rv_raw = Rotation.from_matrix(R).as_rotvec()
     moved_raw = R @ centre + t
-    rv = savgol_filter(rv_raw, window, 2, axis=0, mode="interp")
-    moved = savgol_filter(moved_raw, window, 2, axis=0, mode="interp")
+    rv = _local_quadratic(rv_raw, window_frames)
+    moved = _local_quadratic(moved_raw, window_frames)
     ref = int(np.searchsorted(np.flatnonzero(ok), st.reference_frame))
-    if ref_window > window:
-        rv[ref] = savgol_filter(rv_raw, ref_window, 2, axis=0, mode="interp")[ref]
-        moved[ref] = savgol_filter(moved_raw, ref_window, 2, axis=0, mode="interp")[ref]
+    if _odd_window(reference_window_frames, n) > _odd_window(window_frames, n):
+        rv[ref] = _local_quadratic(rv_raw, reference_window_frames)[ref]
+        moved[ref] = _local_quadratic(moved_raw, reference_window_frames)[ref]
     Rs = Rotation.from_rotvec(rv).as_matrix()
     st.rotation[ok] = Rs
     st.translation[ok] = moved - Rs @ centre
