@@ -87,20 +87,29 @@ def calibrate(args) -> int:
     return 0
 
 
+def _colours_and_light(args):
+    """The capture's colour classes and light from ``--colors`` and ``--light``."""
+    from ..core.capture.markers import ColorClasses, capture_light
+
+    colors = ColorClasses.load(args.colors) if args.colors else None
+    light = capture_light(args.light, colors)
+    return colors or ColorClasses.default(light), light
+
+
 def detect(args) -> int:
     from ..core.capture.detect import run_detection
-    from ..core.capture.markers import ColorClasses, ExtractionSettings
+    from ..core.capture.markers import ExtractionSettings
     from ..core.capture.rig import load_rig
     from ..core.geometry.camera import Camera
 
-    colors = ColorClasses.load_or_default(args.colors)
+    colors, light = _colours_and_light(args)
     layout = load_rig(args.rig).views
     camera = Camera.load(args.camera) if args.camera else None
     if args.threshold < 0 or args.threshold >= 255:
         raise MirrorCapError("--threshold must be in 0..254")
     if args.min_area < 1 or args.marker_diameter < 0:
         raise MirrorCapError("--min-area must be at least 1 and --marker-diameter non-negative")
-    settings = ExtractionSettings(threshold=args.threshold, min_area=args.min_area,
+    settings = ExtractionSettings(light=light, threshold=args.threshold, min_area=args.min_area,
                                   marker_diameter_px=args.marker_diameter)
     source, start, end = _open(args)
     report = run_detection(source, args.output, colors=colors, settings=settings, layout=layout, camera=camera,
@@ -118,14 +127,14 @@ def track(args) -> int:
     import numpy as np
 
     from ..core.capture.boardcal import load_mirrors
-    from ..core.capture.markers import ColorClasses
+    from ..core.capture.markers import ExtractionSettings
     from ..core.capture.rig import load_rig, rigid_markers
     from ..core.geometry.camera import Camera
     from ..core.track.pipeline import run_track
     from ..core.track.tracker import TrackSettings
 
     camera = Camera.load(args.camera)
-    colors = ColorClasses.load_or_default(args.colors)
+    colors, light = _colours_and_light(args)
     rig = load_rig(args.rig)
     rigid, rigid_source = rigid_markers((0, 0, 0, 0), (), rig, colors)
     mirrors = load_mirrors(args.mirrors) if args.mirrors else None
@@ -137,7 +146,8 @@ def track(args) -> int:
     settings = TrackSettings.with_conjecture_limit(args.conjecture_limit)
     source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
-                       colors=colors, layout=rig.views, mirrors=mirrors, known_length=known, start=start, end=end,
+                       colors=colors, extraction=ExtractionSettings(light=light), layout=rig.views, mirrors=mirrors,
+                       known_length=known, start=start, end=end,
                        step=args.step, face_distance_mm=args.face_distance, settings=settings, rigid=rigid,
                        rigid_source=rigid_source)
     if not args.quiet:
@@ -185,7 +195,7 @@ def colors_learn(args) -> int:
     source, start, end = _open(args)
     names = [n.strip() for n in args.names.split(",")] if args.names else None
     classes = learn_color_classes(source, args.classes, names=names, start=start, end=end, step=args.step,
-                                  threshold=args.threshold)
+                                  threshold=args.threshold, light=args.light)
     write_files_atomically({Path(args.output): json.dumps(classes.to_dict(), indent=2) + "\n"})
     if not args.quiet:
         print(f"{len(classes.names)} colour classes -> {args.output}: {', '.join(classes.names)}")
@@ -208,10 +218,12 @@ def bake(args) -> int:
         raise MirrorCapError("--blink-interval must be a positive number of seconds")
     settings = RigSettings(k=args.k, blinks=not args.no_blinks, blink_seed=args.blink_seed,
                            blink_interval_s=args.blink_interval)
+    if (args.take is None) == (args.fap is None):
+        raise MirrorCapError("give either a take (TAKE.c3d) or --fap TAKE.fap")
     res = run_bake(args.take, args.head, args.output, object_name=args.object, mode=args.mode, n_modes=args.modes,
                    neutral_frame=args.neutral_frame, head_pose_report=args.head_pose, head_motion=args.head_motion,
                    settings=settings, report=args.report, drop_unseen=args.drop_unseen,
-                   conjecture_unseen=args.conjecture_unseen, marker_map=args.marker_map)
+                   conjecture_unseen=args.conjecture_unseen, marker_map=args.marker_map, fap=args.fap)
     if not args.quiet:
         line = (f"baked {res['frames']} frames onto {res['object']} ({res['vertices']} vertices) as "
                 f"{'one shape key per frame' if res['mode'] == 'frames' else str(res['modes']) + ' PCA modes'}")
@@ -260,6 +272,19 @@ def retarget(args) -> int:
         _print_missing_shapes(res)
         if res["unobservable"]:
             print(f"  not observable from the markers (kept at 0): {', '.join(res['unobservable'])}")
+    return 0
+
+
+def fap(args) -> int:
+    from ..addon.retarget.fap import run_fap
+
+    res = run_fap(args.take, args.head, args.output, head_object=args.object, head_pose_report=args.head_pose,
+                  marker_map=args.marker_map, neutral_frame=args.neutral_frame, drop_unseen=args.drop_unseen,
+                  conjecture_unseen=args.conjecture_unseen, high_level=not args.no_high_level, report=args.report)
+    if not args.quiet:
+        print(f"{len(res['faps_written'])} FAPs over {res['frames']} frames -> {res['output']} "
+              f"(FAPU mm: {', '.join(f'{k} {v:.1f}' for k, v in res['fapu_mm'].items())}; "
+              f"open_jaw up to {res['open_jaw_max']})")
     return 0
 
 

@@ -6,18 +6,20 @@ Commands (each documented in the README):
     mirror planes + 3D points from one frame of correspondences.
 ``mirrorcap calibrate IMAGES_OR_VIDEO --board SPEC -o CAMERA.json``
     camera intrinsics and distortion from views of a chessboard or ChArUco board.
-``mirrorcap detect VIDEO [--camera CAMERA.json] [--colors COLORS.json] [--rig RIG.json] -o DETECTIONS.csv``
+``mirrorcap detect VIDEO [--camera CAMERA.json] [--colors COLORS.json] [--light uv|normal] [--rig RIG.json] -o DETECTIONS.csv``
     markers in every frame, in the direct view and both mirrors.
 ``mirrorcap track VIDEO --camera CAMERA.json -o TAKE.c3d [--report REPORT.json] [--mirrors MIRRORS.json]``
     labelled 3D marker trajectories with head motion separated.
 ``mirrorcap mirrors VIDEO --camera CAMERA.json --board charuco:... -o MIRRORS.json``
     mirror planes (in mm) from a ChArUco board seen directly and in both mirrors.
-``mirrorcap colors learn VIDEO --classes K -o COLORS.json``
+``mirrorcap colors learn VIDEO --classes K [--light uv|normal] -o COLORS.json``
     colour classes learned from sample frames.
 ``mirrorcap bake TAKE.c3d --head HEAD.blend -o OUT.blend [--mode frames|pca] [--modes K] ...``
     bind the take to the head, run the face rig on every frame, write the head with shape keys.
 ``mirrorcap retarget TAKE.c3d --head HEAD.blend --target TARGET.blend -o OUT.blend [--csv LIVELINK.csv]``
     ARKit-52 weights of the take keyed on another character's shape keys.
+``mirrorcap fap TAKE.c3d --head HEAD.blend -o TAKE.fap`` / ``mirrorcap bake --fap TAKE.fap --head HEAD.blend -o OUT.blend``
+    MPEG-4 FAPs of a take / a .fap file played on a head.
 ``mirrorcap batch TAKES... --head HEAD.blend --out DIR [--workers N] [bake options]``
     bake many takes in parallel worker processes (:mod:`.batch`).
 ``mirrorcap info TAKE.c3d [--json]`` / ``mirrorcap export TAKE.c3d -o POINTS.csv``
@@ -50,6 +52,12 @@ def _source_options(parser, what: str = "video file, image folder or glob", fram
         parser.add_argument("--step", type=int, default=1, help="use every STEP-th frame")
     parser.add_argument("--fps", type=float, help="frame rate of an image sequence (default 30)")
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+
+
+def _light_option(parser) -> None:
+    parser.add_argument("--light", choices=("uv", "normal"),
+                        help="uv: fluorescent markers under black light; normal: coloured dots under ordinary "
+                             "lamps (default: what COLORS.json says, else uv)")
 
 
 def _unseen_options(parser) -> None:
@@ -128,7 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
     _source_options(det)
     det.add_argument("-o", "--output", required=True, help="DETECTIONS.csv to write (a .json report goes beside it)")
     det.add_argument("--camera", help="CAMERA.json; its image size must match the video")
-    det.add_argument("--colors", help="COLORS.json colour classes (default: the four blacklight colours)")
+    det.add_argument("--colors", help="COLORS.json colour classes (default: the light's four colours)")
+    _light_option(det)
     det.add_argument("--rig", help="RIG.json with view rectangles (default: split at the two widest gaps)")
     det.add_argument("--threshold", type=float, default=60.0, help="brightness threshold on max(R,G,B), 0..254")
     det.add_argument("--min-area", type=int, default=4, help="smallest marker in pixels (default 4)")
@@ -152,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     trk.add_argument("--conjecture-limit", type=float, default=2.0, metavar="MM",
                      help="report a hidden marker's conjectured position only where its expected error (3 sigma) "
                           "is within MM; the rest stay gaps (default 2; 'inf' keeps every conjecture, 0 none)")
-    trk.add_argument("--colors", help="COLORS.json colour classes")
+    trk.add_argument("--colors", help="COLORS.json colour classes (default: the light's four colours)")
+    _light_option(trk)
     trk.add_argument("--rig", help="RIG.json view rectangles, and optionally the rigid markers (\"rigid\")")
     trk.set_defaults(func=commands.track)
 
@@ -174,7 +184,9 @@ def build_parser() -> argparse.ArgumentParser:
     learn.add_argument("--classes", type=int, required=True, help="number of colour classes")
     learn.add_argument("-o", "--output", required=True, help="COLORS.json to write")
     learn.add_argument("--names", help="comma-separated class names, in hue order")
-    learn.add_argument("--threshold", type=float, default=60.0)
+    learn.add_argument("--threshold", type=float, default=60.0, help="UV: brightness threshold on max(R,G,B)")
+    learn.add_argument("--light", choices=("uv", "normal"), default="uv",
+                       help="the capture's light (default uv); recorded in COLORS.json")
     learn.set_defaults(func=commands.colors_learn)
 
     demo = sub.add_parser("demo-mirrors", help="mirror planes and 3D points of the embedded two-mirror sample",
@@ -230,7 +242,10 @@ def _blender_commands(sub) -> None:
     bake = sub.add_parser("bake", help="bake a take onto a head as shape keys (needs bpy)",
                           description="Register TAKE.c3d to the head (by markers labelled lm_<name>, else by the skin surface), run the face rig "
                                       "(regions, jaw, inner lip, blinks) and write the head with shape keys.")
-    bake.add_argument("take", help="TAKE.c3d (from `mirrorcap track` or any C3D with landmark labels)")
+    bake.add_argument("take", nargs="?", help="TAKE.c3d (from `mirrorcap track` or any C3D with landmark labels)")
+    bake.add_argument("--fap", metavar="TAKE.fap",
+                      help="play an MPEG-4 FAP file on the head instead of a take (its feature points move, the face "
+                           "rig does the rest)")
     bake.add_argument("--head", required=True, help="HEAD.blend with a head mesh (region_*, lm_* vertex groups)")
     bake.add_argument("-o", "--output", required=True, help="OUT.blend to write")
     _bake_options(bake)
@@ -270,6 +285,25 @@ def _blender_commands(sub) -> None:
     ret.add_argument("--report", help="RETARGET.json to write")
     ret.add_argument("-q", "--quiet", action="store_true")
     ret.set_defaults(func=commands.retarget)
+
+    fap = sub.add_parser("fap", help="MPEG-4 facial animation parameters of a take (needs bpy)",
+                         description="Bind TAKE.c3d to the head as bake does, run the face rig, and measure the "
+                                     "low-level FAPs 3-64 at the head's MPEG-4 feature points in its FAPU, the head "
+                                     "rotation (48-50), and the viseme and expression (FAP 1-2) by nearest pose; "
+                                     "write them in the MPEG-4 FAP text form.")
+    fap.add_argument("take", help="TAKE.c3d")
+    fap.add_argument("--head", required=True, help="HEAD.blend with a head mesh (lm_*, region_* and optionally "
+                                                   "fp_<id> vertex groups)")
+    fap.add_argument("--object", help="the head object's name (default: the only head in the file)")
+    fap.add_argument("-o", "--output", required=True, help="TAKE.fap to write")
+    fap.add_argument("--head-pose", help="REPORT.json of `mirrorcap track` (default: estimate the head motion)")
+    fap.add_argument("--marker-map", metavar="MAP.json", help="bind markers by name (as for bake)")
+    fap.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
+    _unseen_options(fap)
+    fap.add_argument("--no-high-level", action="store_true", help="leave FAP 1 (viseme) and 2 (expression) out")
+    fap.add_argument("--report", help="FAP.json to write: feature points, FAPU, FAPs written")
+    fap.add_argument("-q", "--quiet", action="store_true")
+    fap.set_defaults(func=commands.fap)
 
     demo = sub.add_parser("demo", help="the whole job on the embedded sample clip (needs bpy)",
                           description="Track the sample rig clip, fit the generic head to the sample scan, bind, "

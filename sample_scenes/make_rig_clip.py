@@ -75,6 +75,11 @@ MARKER_LIFT_MM = 0.5              # how far a dot's centre sits above the skin
 VISIBLE_DEG = 73.0                # a marker is "seen" by a view within this angle of its skin normal
 
 
+# sRGB skin tones for normal-light clips (``--skin``), and the four matte paints of the dots there
+SKIN_TONES = {"light": (226, 182, 152), "medium": (176, 124, 92), "dark": (104, 68, 48)}
+NORMAL_PAINTS = {"blue": (30, 70, 230), "green": (30, 175, 60), "yellow": (245, 215, 20), "magenta": (215, 30, 160)}
+
+
 @dataclasses.dataclass(frozen=True)
 class ClipSpec:
     """The rig of a rendered clip; the defaults make the embedded sample."""
@@ -87,10 +92,16 @@ class ClipSpec:
     n_markers: int = 150
     head_deg: tuple = (6.0, 6.0, 6.0)    # largest pitch, yaw, roll of the head motion
     tempo: float = 1.0                   # expression speed and frequency
+    light: str = "uv"                    # "uv": fluorescent dots under black light; "normal": coloured dots
+    skin_rgb: tuple = SKIN_TONES["light"]  # sRGB skin colour under normal light
 
     @property
     def mirror_centre(self):
         return (*MIRROR_CENTRE_XY, self.head_distance_mm - 90.0)
+
+    @property
+    def paints(self) -> dict:
+        return PAINTS if self.light == "uv" else NORMAL_PAINTS
 # sRGB colours of the four blacklight paints (core.markers' default classes)
 PAINTS = {"pink": (255, 110, 200), "blue-green": (70, 230, 200), "dark-blue": (60, 80, 255),
           "purple": (175, 70, 255)}
@@ -258,7 +269,10 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     scene.collection.objects.link(cam)
     scene.camera = cam
 
-    def material(name, color=None, emission=None, glossy=False):
+    def srgb_to_linear(rgb):
+        return [((c / 255.0 + 0.055) / 1.055) ** 2.4 for c in rgb]
+
+    def material(name, color=None, emission=None, glossy=False, roughness=None):
         mat = bpy.data.materials.new(name)
         mat.use_nodes = True
         nt = mat.node_tree
@@ -273,6 +287,11 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
             node = nt.nodes.new("ShaderNodeBsdfGlossy")
             node.inputs["Color"].default_value = (0.92, 0.92, 0.92, 1.0)
             node.inputs["Roughness"].default_value = 0.0
+            nt.links.new(node.outputs[0], out.inputs["Surface"])
+        elif roughness is not None:                    # normal light: skin sheen and highlights
+            node = nt.nodes.new("ShaderNodeBsdfPrincipled")
+            node.inputs["Base Color"].default_value = (*color, 1.0)
+            node.inputs["Roughness"].default_value = roughness
             nt.links.new(node.outputs[0], out.inputs["Surface"])
         else:
             node = nt.nodes.new("ShaderNodeBsdfDiffuse")
@@ -291,7 +310,10 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     mesh.polygons.foreach_set("use_smooth", np.ones(len(T), bool))
     mesh.update()
     skin = bpy.data.objects.new("subject", mesh)
-    skin.data.materials.append(material("skin_under_blacklight", color=(0.10, 0.07, 0.16)))
+    if spec.light == "uv":
+        skin.data.materials.append(material("skin_under_blacklight", color=(0.10, 0.07, 0.16)))
+    else:
+        skin.data.materials.append(material("skin", color=srgb_to_linear(spec.skin_rgb), roughness=0.45))
     scene.collection.objects.link(skin)
 
     # markers: one mesh of 150 icospheres, one material per paint
@@ -310,9 +332,11 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     dots.polygons.add(len(allt))
     dots.loops.foreach_set("vertex_index", allt.ravel().astype(np.int32))
     dots.polygons.foreach_set("loop_start", np.arange(0, allt.size, 3, dtype=np.int32))
-    for name, rgb in PAINTS.items():
-        lin = [((c / 255.0 + 0.055) / 1.055) ** 2.4 for c in rgb]
-        dots.materials.append(material(f"paint_{name}", emission=lin))
+    for name, rgb in spec.paints.items():
+        if spec.light == "uv":
+            dots.materials.append(material(f"paint_{name}", emission=srgb_to_linear(rgb)))
+        else:
+            dots.materials.append(material(f"paint_{name}", color=srgb_to_linear(rgb), roughness=0.7))
     dots.polygons.foreach_set("material_index", np.repeat(np.asarray(marker_colors, np.int32), len(tris)))
     dots.polygons.foreach_set("use_smooth", np.ones(len(allt), bool))
     dots.update()
@@ -327,6 +351,9 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
         mo = bpy.data.objects.new(f"mirror{k}", pm)
         scene.collection.objects.link(mo)
 
+    if spec.light == "normal":
+        add_studio_lights(bpy, scene)
+        return scene, skin, markers, unit
     # a dim black-light lamp above the camera: skin faintly visible, far below the marker threshold
     lamp = bpy.data.lights.new("blacklight", "AREA")
     lamp.energy = 0.35
@@ -338,6 +365,35 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     lo.visible_glossy = False                         # no lamp reflection in the mirrors
     scene.collection.objects.link(lo)
     return scene, skin, markers, unit
+
+
+def add_studio_lights(bpy, scene):
+    """Normal light: a grey room, a soft key light above and left of the camera, a dimmer fill
+    on the right (shading across the face and highlights on the skin); the lamps themselves are not
+    seen in the mirrors."""
+    from mirrorcap.addon.common.frames import core_to_blender
+
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.03, 0.03, 0.03, 1.0)
+    scene.cycles.diffuse_bounces = 1
+    for name, xyz, energy, size in (("key", (-250.0, -300.0, 150.0), 5.0, 0.5),
+                                    ("fill", (300.0, -50.0, 200.0), 2.0, 0.6)):
+        lamp = bpy.data.lights.new(name, "AREA")
+        lamp.energy = energy
+        lamp.size = size
+        lo = bpy.data.objects.new(name, lamp)
+        lo.location = core_to_blender(np.array(xyz))
+        target = core_to_blender(np.array([0.0, 0.0, 650.0]))
+        direction = target - np.asarray(lo.location)
+        lo.rotation_euler = _look_rotation(direction)
+        lo.visible_glossy = False
+        scene.collection.objects.link(lo)
+
+
+def _look_rotation(direction):
+    """An Euler rotation that turns a light's -z axis along ``direction`` (Blender frame)."""
+    from mathutils import Vector
+
+    return Vector(direction).to_track_quat("-Z", "Y").to_euler()
 
 
 def main(argv=None) -> int:
@@ -357,6 +413,10 @@ def main(argv=None) -> int:
     ap.add_argument("--head-deg", type=float, nargs=3, metavar=("RX", "RY", "RZ"), default=ClipSpec.head_deg,
                     help="largest pitch, yaw, roll of the head motion")
     ap.add_argument("--tempo", type=float, default=ClipSpec.tempo, help="expressions this many times as fast")
+    ap.add_argument("--light", choices=("uv", "normal"), default="uv",
+                    help="uv: fluorescent dots under black light; normal: matte coloured dots under studio light")
+    ap.add_argument("--skin", default="light",
+                    help=f"skin under normal light: {', '.join(SKIN_TONES)} or R,G,B (sRGB 0-255)")
     ap.add_argument("--no-scan", action="store_true", help="write no scan.ply / scan_landmarks.json")
     ap.add_argument("--truth-only", action="store_true",
                     help="render nothing: recompute the truth of an existing clip made with the same options "
@@ -364,7 +424,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     spec = ClipSpec(image_size=tuple(args.size), focal_px=args.focal, head_distance_mm=args.distance,
                     mirror_longitude_deg=args.mirror_deg, marker_radius_mm=args.marker_mm / 2,
-                    n_markers=args.markers, head_deg=tuple(args.head_deg), tempo=args.tempo)
+                    n_markers=args.markers, head_deg=tuple(args.head_deg), tempo=args.tempo,
+                    light=args.light, skin_rgb=skin_colour(args.skin))
     out = args.out.resolve()
     cache = HERE / ".cache" / f"{out.name}_frames"
 
@@ -381,7 +442,7 @@ def main(argv=None) -> int:
     disp, _ = performance(head, keys, args.frames, FPS, seed=args.seed, tempo=spec.tempo)
     R, t = head_motion(args.frames, FPS, max_deg=spec.head_deg, seed=args.seed)
     t = t + np.array([0.0, 0.0, spec.head_distance_mm])
-    marker_colors = np.arange(len(verts)) % len(PAINTS)
+    marker_colors = np.arange(len(verts)) % len(spec.paints)
     rng.shuffle(marker_colors)
 
     camera = Camera.ideal(spec.focal_px, spec.image_size)
@@ -456,7 +517,8 @@ def main(argv=None) -> int:
             "image_size": list(spec.image_size), "focal_px": spec.focal_px,
             "head_distance_mm": spec.head_distance_mm, "mirror_longitude_deg": spec.mirror_longitude_deg,
             "marker_diameter_mm": 2 * spec.marker_radius_mm, "head_deg": list(spec.head_deg), "tempo": spec.tempo,
-            "seed": args.seed, "paints": PAINTS, "made_by": "sample_scenes/make_rig_clip.py"}
+            "seed": args.seed, "light": spec.light, "paints": spec.paints,
+            **({"skin_rgb": list(spec.skin_rgb)} if spec.light == "normal" else {}), "made_by": "sample_scenes/make_rig_clip.py"}
     out.mkdir(parents=True, exist_ok=True)
     files = {
         out / "clip.mp4": (tmp_dir / "clip.mp4").read_bytes(),
@@ -473,6 +535,18 @@ def main(argv=None) -> int:
     size = (out / "clip.mp4").stat().st_size
     print(f"{out / 'clip.mp4'}: {size / 1e6:.2f} MB, {args.frames} frames; truth, scan and camera beside it")
     return 0
+
+
+def skin_colour(text: str) -> tuple:
+    if text in SKIN_TONES:
+        return SKIN_TONES[text]
+    try:
+        rgb = tuple(int(c) for c in text.split(","))
+    except ValueError:
+        rgb = ()
+    if len(rgb) != 3 or not all(0 <= c <= 255 for c in rgb):
+        raise SystemExit(f"--skin {text!r}: give one of {', '.join(SKIN_TONES)} or R,G,B with 0-255 values")
+    return rgb
 
 
 def npz_bytes(**arrays) -> bytes:

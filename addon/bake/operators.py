@@ -165,26 +165,37 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
     head_motion: BoolProperty(name="Head Motion", default=False, description="key the head motion on the object")
     blinks: BoolProperty(name="Blinks", default=True)
     blink_seed: IntProperty(name="Blink Seed", default=0)
+    fap: StringProperty(name="FAP File", subtype="FILE_PATH",
+                        description="an MPEG-4 .fap file to play on the head instead of the take")
 
     def prepare(self, context):
         from ...core.take.c3d import read_c3d
-        from ..common.headio import read_head
+        from ..common.headio import head_feature_points, read_head
 
         obj = head_object_from(context, self.head_object)
-        data = read_c3d(required(input_path(self.take, scene_settings(context).take, what="take"), "take (TAKE.c3d)"))
-        if self.mode == "pca" and self.modes > data["points"].shape[0]:
-            raise InputError(f"Modes must be at most the take's {data['points'].shape[0]} frames")
         head = read_head(obj)
         head.validate()
+        pose = None
+        if self.fap:
+            from ...core.retarget.mpeg4 import read_fap, replay_take
+
+            track = read_fap(required(input_path(self.fap, what="FAP file"), "FAP file"))
+            labels, points, mapping, pose = replay_take(track, head, head_feature_points(obj, head))
+            data = {"labels": labels, "points": points, "rate": track.fps}
+        else:
+            data = read_c3d(required(input_path(self.take, scene_settings(context).take, what="take"),
+                                     "take (TAKE.c3d)"))
+            mapping = _scene_marker_map(context)
+        if self.mode == "pca" and self.modes > data["points"].shape[0]:
+            raise InputError(f"Modes must be at most the take's {data['points'].shape[0]} frames")
         self._obj_name = obj.name
-        mapping = _scene_marker_map(context)
 
         def work(progress):
             from ...core.face.animate import animate_take
             from ...core.face.facerig import RigSettings
 
             anim = animate_take(head, data["labels"], data["points"], data["rate"], neutral_frame=self.neutral_frame,
-                                unseen=self.unseen(), settings=RigSettings(blinks=self.blinks, blink_seed=self.blink_seed,
+                                head_pose=pose, unseen=self.unseen(), settings=RigSettings(blinks=self.blinks, blink_seed=self.blink_seed,
                                                                            blink_interval_s=None),
                                 progress=progress, marker_map=mapping)
             return head, anim.binding, anim.displacements, anim.rate

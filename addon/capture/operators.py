@@ -12,7 +12,7 @@ import numpy as np
 from bpy.props import IntProperty, StringProperty
 
 from ...core.common.errors import InputError
-from ..common.inputs import input_path, required, rig_and_colours, scene_settings
+from ..common.inputs import extraction_settings, input_path, required, rig_and_colours, scene_settings
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
 
 
@@ -88,7 +88,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
     frame: IntProperty(name="Frame", default=-1, min=-1, description="video frame (0-based); -1: the scene's current")
 
     def run(self, context):
-        from ...core.capture.markers import ExtractionSettings, MarkerExtractor
+        from ...core.capture.markers import marker_extractor
         from ...core.capture.rig import split_views_by_gaps
         from ...core.capture.video import open_source
         from ..common.clip import detections_to_clip_tracks, find_clip
@@ -100,10 +100,12 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         n = min(max(n, 0), source.frame_count - 1)
         image = next(iter(source.frames(n, n + 1, 1)))[1]
         rig, colors = rig_and_colours(s)
-        settings = ExtractionSettings()
-        det = MarkerExtractor(colors, settings)(image)
+        settings = extraction_settings(s)
+        det = marker_extractor(colors, settings)(image)
         if len(det) == 0:
-            raise InputError(f"no markers found in frame {n}: is the clip dark with bright dots?")
+            raise InputError(f"no markers found in frame {n}: " + ("are there coloured dots of the colour classes on "
+                             "the face?" if s.light == "normal" else "is the clip dark with bright dots? (coloured dots "
+                             "under ordinary light: set Light to Normal)"))
         layout = rig.views or split_views_by_gaps(det.x, 2.0 * settings.marker_diameter_px)
         view = layout.assign(det.x, det.y)
         clip = find_clip(video)

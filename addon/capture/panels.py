@@ -22,6 +22,7 @@ class MIRRORCAP_PT_capture(SidebarPanel, bpy.types.Panel):
         col.operator("mirrorcap.calibrate_camera", icon="CAMERA_DATA")
         col.prop(s, "rig")
         col.prop(s, "colors")
+        col.prop(s, "light", expand=True)
         col.separator()
         col.operator("mirrorcap.detect_markers", icon="TRACKER")
         col.prop(s, "mirrors")

@@ -173,3 +173,20 @@ def replace_head_vertices(obj, old_core, new_core) -> None:
     mesh.vertices.foreach_get("co", co)
     mesh.vertices.foreach_set("co", co + delta)
     mesh.update()
+
+
+def head_feature_points(obj, head: HeadModel) -> dict:
+    """The head's MPEG-4 feature points (:func:`core.retarget.mpeg4.feature_points`), its
+    jaw-opening shape key (``jawOpen``, any case) telling the lower lip from the upper lip."""
+    from ...core.retarget.mpeg4 import feature_points
+
+    jaw_open = None
+    key = obj.data.shape_keys
+    block = next((kb for kb in key.key_blocks if kb.name.lower() == "jawopen"), None) if key is not None else None
+    if block is not None:
+        nv = len(obj.data.vertices)
+        base, co = np.empty(nv * 3, np.float32), np.empty(nv * 3, np.float32)
+        key.reference_key.points.foreach_get("co", base)
+        block.points.foreach_get("co", co)
+        jaw_open = blender_to_core(co.reshape(-1, 3)) - blender_to_core(base.reshape(-1, 3))
+    return feature_points(head, jaw_open)

@@ -54,13 +54,21 @@ def head_object_from(context, name: str):
 
 def rig_and_colours(s):
     """The scene's rig file (RIG.json: views and rigid markers) and colour classes
-    (COLORS.json, else the four blacklight colours), each read once."""
-    from ...core.capture.markers import ColorClasses
+    (COLORS.json, else the four colours of the scene's light), each read once."""
+    from ...core.capture.markers import ColorClasses, capture_light
     from ...core.capture.rig import load_rig
 
     rig = load_rig(input_path(s.rig, what="rig file") if s.rig else None)
-    colours = ColorClasses.load_or_default(input_path(s.colors, what="colour file") if s.colors else None)
+    colours = ColorClasses.load_or_default(input_path(s.colors, what="colour file") if s.colors else None, s.light)
+    capture_light(s.light, colours)          # a colour file made for the other light is refused
     return rig, colours
+
+
+def extraction_settings(s):
+    """The marker extraction settings of the scene's light."""
+    from ...core.capture.markers import ExtractionSettings
+
+    return ExtractionSettings(light=s.light)
 
 
 def rigid_from_settings(s, rig, colours):

@@ -21,6 +21,8 @@ from bpy.props import (
 #: the add-on's own module: this package's parent (``bl_ext.<repo>.mirrorcap`` inside Blender)
 ADDON_ID = __package__.rsplit(".", 2)[0]  # the extension package: <...>.mirrorcap of <...>.mirrorcap.addon.common
 
+LIGHTS = (("uv", "UV", "fluorescent markers under black-light lamps"),
+          ("normal", "Normal", "coloured dots under ordinary lamps"))
 BAKE_MODES = (("frames", "Frames", "one shape key per take frame, keyed on its frame"),
               ("pca", "PCA", "K eigen-deformation shape keys with keyed weights (compact)"))
 
@@ -37,6 +39,8 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     mirrors: StringProperty(name="Mirrors", subtype="FILE_PATH",
                             description="MIRRORS.json in mm (optional; default: self-calibration from the markers)")
     colors: StringProperty(name="Colours", subtype="FILE_PATH", description="COLORS.json colour classes (optional)")
+    light: EnumProperty(name="Light", items=LIGHTS, default="uv",
+                        description="how the markers were lit: fluorescent under black light, or coloured dots")
     take: StringProperty(name="Take", subtype="FILE_PATH", default="//take.c3d", description="TAKE.c3d to write or read")
     frame_start: IntProperty(name="First Frame", default=0, min=0, description="first video frame to track (0-based)")
     frame_end: IntProperty(name="End Frame", default=0, min=0, description="video frame to stop before (0: the end)")
@@ -69,6 +73,8 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
                                      description="the mesh with ARKit-named shape keys that Retarget animates")
     livelink_csv: StringProperty(name="Live Link CSV", subtype="FILE_PATH", default="",
                                  description="LIVELINK.csv that Retarget writes (optional)")
+    fap_file: StringProperty(name="FAP File", subtype="FILE_PATH", default="//take.fap",
+                             description="TAKE.fap: MPEG-4 FAPs that Export FAPs writes and Play FAP File reads")
     marker_map: StringProperty(name="Marker Map", subtype="FILE_PATH", default="",
                                description="MAP.json binding markers by name (LABEL: lm_<name> | vertex | rigid | "
                                            "ignore); the map buttons below write it")

@@ -85,4 +85,52 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
                 f"fit residual {float((solve.residual_mm ** 2).mean() ** 0.5):.3f} mm RMS")
 
 
-OPERATORS = (MIRRORCAP_OT_retarget,)
+class MIRRORCAP_OT_export_faps(MirrorCapJobOperator):
+    """Measure the take's MPEG-4 facial animation parameters on the head and write them as a .fap file"""
+
+    bl_idname = "mirrorcap.export_faps"
+    bl_label = "Export FAPs"
+
+    take: StringProperty(name="Take", subtype="FILE_PATH", description="TAKE.c3d (default: the scene's)")
+    head_object: StringProperty(name="Head", description="the head mesh (default: the scene's head)")
+    fap: StringProperty(name="FAP File", subtype="FILE_PATH", description="TAKE.fap to write (default: the scene's)")
+    neutral_frame: IntProperty(name="Neutral Frame", default=0, min=0)
+
+    def prepare(self, context):
+        from ...core.face.bind import load_marker_map
+        from ...core.take.c3d import read_c3d
+        from ..common.headio import head_feature_points, read_head
+
+        s = scene_settings(context)
+        obj = head_object_from(context, self.head_object)
+        out = required(input_path(self.fap or s.fap_file, must_exist=False), "FAP file to write (TAKE.fap)")
+        if not out.parent.is_dir():
+            raise InputError(f"the FAP file's folder {out.parent} does not exist (save the .blend first for // paths)")
+        take = required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)")
+        data = read_c3d(take)
+        head = read_head(obj)
+        head.validate()
+        points = head_feature_points(obj, head)
+        mapping = load_marker_map(input_path(s.marker_map, what="marker map")) if s.marker_map else None
+        self._out = out
+
+        def work(progress):
+            from ...core.retarget.mpeg4 import fap_text, take_faps
+
+            # markers first seen after the neutral frame: placed from their neighbours, as Bake does
+            _, track = take_faps(head, data["labels"], data["points"], data["rate"], feature=points,
+                                 neutral_frame=self.neutral_frame, unseen="conjecture", marker_map=mapping,
+                                 name=take.stem, progress=progress)
+            return track, fap_text(track)
+
+        return work
+
+    def finish(self, context, result):
+        from ...core.common.files import write_files_atomically
+
+        track, text = result
+        write_files_atomically({self._out: text})
+        return f"{int(track.mask.sum())} FAPs over {track.frames} frames -> {self._out.name}"
+
+
+OPERATORS = (MIRRORCAP_OT_retarget, MIRRORCAP_OT_export_faps)

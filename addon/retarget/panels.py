@@ -19,6 +19,12 @@ class MIRRORCAP_PT_retarget(SidebarPanel, bpy.types.Panel):
         col.prop(s, "livelink_csv")
         col.operator("mirrorcap.retarget", icon="ARMATURE_DATA")
         col.label(text="ARKit-52 weights; Esc cancels", icon="INFO")
+        col.separator()
+        col.label(text="MPEG-4 facial animation parameters")
+        col.prop(s, "fap_file")
+        row = col.row(align=True)
+        row.operator("mirrorcap.export_faps", icon="EXPORT")
+        row.operator("mirrorcap.bake", text="Play FAP File", icon="PLAY").fap = s.fap_file
 
 
 PANELS = (MIRRORCAP_PT_retarget,)

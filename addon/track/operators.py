@@ -10,8 +10,8 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ...core.common.errors import InputError
-from ..common.inputs import (input_path, required, rig_and_colours, rigid_from_settings, scene_settings,
-                             selected_marker_labels, take_report_path)
+from ..common.inputs import (extraction_settings, input_path, required, rig_and_colours, rigid_from_settings,
+                             scene_settings, selected_marker_labels, take_report_path)
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
 
 
@@ -94,7 +94,8 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
             from ...core.track.pipeline import run_track
             from ...core.track.tracker import TrackSettings
 
-            report = run_track(source, camera, take, report=take_report_path(take), colors=colors, layout=layout,
+            report = run_track(source, camera, take, report=take_report_path(take), colors=colors,
+                               extraction=extraction_settings(s), layout=layout,
                                mirrors=mirrors, start=s.frame_start, end=end,
                                settings=TrackSettings.with_conjecture_limit(s.conjecture_limit_mm),
                                rigid=rigid, rigid_source=rigid_source, log=log,

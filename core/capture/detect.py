@@ -29,7 +29,7 @@ from ..common.errors import InputError
 from ..common.files import default_file_mode, write_files_atomically
 from ..common.log import FrameProgress
 from ..geometry.camera import Camera
-from .markers import ColorClasses, ExtractionSettings, MarkerExtractor
+from .markers import ColorClasses, ExtractionSettings, marker_extractor
 from .rig import VIEW_NAMES, ViewLayout, split_views_by_gaps
 from .video import VideoSource
 
@@ -79,8 +79,16 @@ def _layout_from(pending, settings: ExtractionSettings, source: VideoSource) -> 
     xs = np.concatenate([d.x for _, d in pending])
     if xs.size == 0:
         raise InputError(f"no markers found in the first {len(pending)} frames of {source.path} "
-                         f"(threshold {settings.threshold:g}); is this a rig video, or does --threshold need lowering?")
+                         f"{_nothing_found_hint(settings)}")
     return split_views_by_gaps(xs, min_gap_px=2.0 * settings.marker_diameter_px)
+
+
+def _nothing_found_hint(settings: ExtractionSettings) -> str:
+    if settings.light == "normal":
+        return ("under normal light: are there coloured dots on the face, and do the colour classes match them "
+                "(`mirrorcap colors learn --light normal`)? Is the capture lit with UV (--light uv)?")
+    return (f"(threshold {settings.threshold:g}): is this a rig video, or does --threshold need lowering? "
+            "Coloured dots under ordinary light need --light normal")
 
 
 class DetectionStream:
@@ -102,7 +110,7 @@ class DetectionStream:
         self.processed = 0
 
     def __iter__(self):
-        extractor = MarkerExtractor(self.colors, self.settings)
+        extractor = marker_extractor(self.colors, self.settings)
         pending = []
         for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
             t0 = time.perf_counter()
@@ -141,8 +149,8 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
     """Stream ``source`` through the extractor and write DETECTIONS.csv (+ .json)
     atomically. Returns the report written to the JSON. ``progress(text, final)``, if given,
     receives a progress line at most once a second (:class:`..common.log.FrameProgress`)."""
-    colors = colors or ColorClasses.default()
     settings = settings or ExtractionSettings()
+    colors = colors or ColorClasses.default(settings.light)
     _check_camera(camera, source)
     output = Path(output)
     if not output.parent.is_dir():
@@ -171,8 +179,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
         if done == 0:
             raise InputError(f"no frame could be read from {source.path}")
         if counts[:-1].sum() == 0:
-            raise InputError(f"no markers found in {source.path} (threshold {settings.threshold:g}); "
-                             "is this a rig video, or does --threshold need lowering?")
+            raise InputError(f"no markers found in {source.path} {_nothing_found_hint(settings)}")
         elapsed = time.perf_counter() - t_start
         t_extract = stream.extract_s
         end_eff = source.frame_count if end is None else min(end, source.frame_count)
@@ -201,11 +208,14 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
 
 def learn_color_classes(source: VideoSource, n_classes: int, *, names=None, start: int = 0, end: int | None = None,
                         step: int = 1, max_frames: int = 50, threshold: float = 60.0,
-                        marker_diameter_px: float = 6.0, samples_per_class: int = 8) -> ColorClasses:
+                        marker_diameter_px: float = 6.0, samples_per_class: int = 8,
+                        light: str = "uv") -> ColorClasses:
     """Learn ``n_classes`` colour classes from the markers of sample frames: k-means
     (OpenCV, fixed seed) on each marker's mean normalised colour; each class keeps
     its centre and the members nearest to it as 1-NN samples. Classes are ordered
-    by hue; ``names`` (one per class) name them, else ``class0``, ``class1``, ..."""
+    by hue; ``names`` (one per class) name them, else ``class0``, ``class1``, ...
+    Under ``light="normal"`` the markers are every blob whose colour stands out from the skin
+    around it (:mod:`.colordots` without the class test); the classes record their light."""
     import cv2
 
     if n_classes < 1:
@@ -213,8 +223,9 @@ def learn_color_classes(source: VideoSource, n_classes: int, *, names=None, star
     if names is not None and len(names) != n_classes:
         raise InputError(f"{len(names)} names given for {n_classes} classes")
     one_class = ColorClasses.from_dict({"classes": [{"name": "any", "samples": [[1, 1, 1]]}]})
-    extractor = MarkerExtractor(one_class, ExtractionSettings(threshold=threshold,
-                                                              marker_diameter_px=marker_diameter_px))
+    extractor = marker_extractor(one_class, ExtractionSettings(light=light, threshold=threshold,
+                                                               marker_diameter_px=marker_diameter_px,
+                                                               max_class_distance=np.inf))
     pooled = []
     for k, (_, frame) in enumerate(source.frames(start, end, step)):
         if k >= max_frames:
@@ -235,4 +246,4 @@ def learn_color_classes(source: VideoSource, n_classes: int, *, names=None, star
         near = members[np.argsort(np.linalg.norm(members - centres[k], axis=1))[: samples_per_class - 1]]
         samples = np.vstack([centres[k][None], near])
         classes.append({"name": names[rank] if names else f"class{rank}", "samples": samples.tolist()})
-    return ColorClasses.from_dict({"classes": classes})
+    return ColorClasses.from_dict({"classes": classes, "light": light})

@@ -57,6 +57,9 @@ import numpy as np
 
 from ..common.errors import InputError
 from ..common.files import read_json
+from .detections import Detections, empty_detections
+
+LIGHTS = ("uv", "normal")  # fluorescent markers under black light; coloured dots under ordinary lamps
 
 # Typical fluorescent colours under blacklight-blue lamps (section 5.2, figure 5.3(d)), RGB.
 DEFAULT_CLASSES = {
@@ -64,6 +67,15 @@ DEFAULT_CLASSES = {
     "blue-green": [[70, 230, 200], [60, 215, 185], [90, 240, 215], [55, 200, 170]],
     "dark-blue": [[60, 80, 255], [50, 70, 235], [75, 95, 255], [45, 65, 215]],
     "purple": [[175, 70, 255], [160, 60, 240], [190, 85, 255], [150, 55, 220]],
+}
+
+# Matte sticker colours as a camera sees them on skin under studio lamps (sRGB; only the
+# chromaticity matters).
+NORMAL_LIGHT_CLASSES = {
+    "blue": [[30, 70, 230], [20, 50, 150], [40, 80, 200], [25, 60, 120]],
+    "green": [[30, 175, 60], [25, 120, 45], [45, 160, 70], [20, 90, 35]],
+    "yellow": [[245, 215, 20], [200, 170, 30], [230, 200, 60], [150, 120, 20]],
+    "magenta": [[215, 30, 160], [170, 25, 120], [200, 50, 150], [130, 20, 95]],
 }
 
 
@@ -74,10 +86,14 @@ class ColorClasses:
     names: list
     samples: np.ndarray  # (S, 3) normalised rgb
     labels: np.ndarray  # (S,) class index of each sample
+    light: str | None = None  # the light the classes are for ("uv", "normal"), when the file says
 
     @classmethod
     def from_dict(cls, data, source: str = "colour classes") -> "ColorClasses":
         try:
+            light = data.get("light")
+            if light is not None and light not in LIGHTS:
+                raise ValueError(f'"light" must be one of {", ".join(LIGHTS)}, not {light!r}')
             classes = data["classes"]
             names, samples, labels = [], [], []
             for k, entry in enumerate(classes):
@@ -88,32 +104,37 @@ class ColorClasses:
                 names.append(name)
                 samples.append(rgb / rgb.sum(axis=1, keepdims=True))
                 labels.append(np.full(rgb.shape[0], k))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             detail = exc.args[0] if isinstance(exc, ValueError) and exc.args else "expected " \
-                '{"classes": [{"name": ..., "samples": [[R, G, B], ...]}, ...]}'
+                '{"classes": [{"name": ..., "samples": [[R, G, B], ...]}, ...], "light": "uv" | "normal"}'
             raise InputError(f"{source}: {detail}") from None
         if not names:
             raise InputError(f"{source}: no colour classes")
         if len(set(names)) != len(names):
             raise InputError(f"{source}: class names must be unique")
-        return cls(names=names, samples=np.concatenate(samples), labels=np.concatenate(labels))
+        return cls(names=names, samples=np.concatenate(samples), labels=np.concatenate(labels), light=light)
 
     @classmethod
-    def default(cls) -> "ColorClasses":
-        return cls.from_dict({"classes": [{"name": n, "samples": s} for n, s in DEFAULT_CLASSES.items()]})
+    def default(cls, light: str = "uv") -> "ColorClasses":
+        """The four blacklight paints, or under ``light="normal"`` the four sticker colours of
+        :mod:`.colordots`."""
+        table = DEFAULT_CLASSES if light == "uv" else NORMAL_LIGHT_CLASSES
+        return cls.from_dict({"classes": [{"name": n, "samples": s} for n, s in table.items()], "light": light})
 
     @classmethod
     def load(cls, path) -> "ColorClasses":
         return cls.from_dict(read_json(path, "colour file"), source=f"colour file {path}")
 
     @classmethod
-    def load_or_default(cls, path) -> "ColorClasses":
-        """COLORS.json if a path is given, else the four blacklight colours."""
-        return cls.load(path) if path else cls.default()
+    def load_or_default(cls, path, light: str | None = None) -> "ColorClasses":
+        """COLORS.json if a path is given, else the four default colours of the light (UV unless
+        ``light`` says); see :func:`capture_light` for which light a capture is under."""
+        return cls.load(path) if path else cls.default(light or "uv")
 
     def to_dict(self) -> dict:
-        return {"classes": [{"name": n, "samples": np.round(self.samples[self.labels == k] * 1000, 2).tolist()}
-                            for k, n in enumerate(self.names)]}
+        out = {"classes": [{"name": n, "samples": np.round(self.samples[self.labels == k] * 1000, 2).tolist()}
+                           for k, n in enumerate(self.names)]}
+        return {**out, "light": self.light} if self.light else out
 
     def classify(self, rgb) -> np.ndarray:
         """Class index ``(n,)`` of colours ``(n, 3)`` (RGB, any scale) by 1-NN in
@@ -125,31 +146,45 @@ class ColorClasses:
         d2 = (self.samples**2).sum(axis=1)[None, :] - 2.0 * nrgb @ self.samples.T
         return self.labels[np.argmin(d2, axis=1)]
 
+    def distance(self, rgb) -> np.ndarray:
+        """Distance ``(n,)`` in normalised rgb from colours ``(n, 3)`` to their nearest class sample."""
+        rgb = np.asarray(rgb, dtype=float)
+        s = rgb.sum(axis=1, keepdims=True)
+        nrgb = rgb / np.where(s > 0, s, 1.0)
+        d2 = ((nrgb[:, None, :] - self.samples[None]) ** 2).sum(axis=2)
+        return np.sqrt(d2.min(axis=1)) if d2.size else np.zeros(len(nrgb))
+
+
+def capture_light(light: str | None, colors: "ColorClasses | None" = None) -> str:
+    """The light a capture is under: the user's choice (``--light``), else what the colour file
+    says, else UV. A colour file made for the other light is refused."""
+    if light is not None and light not in LIGHTS:
+        raise InputError(f"light must be one of {', '.join(LIGHTS)}, not {light!r}")
+    if colors is not None and colors.light and light and colors.light != light:
+        raise InputError(f"the colour classes are for {colors.light} light but the capture is under {light} light")
+    return light or (colors.light if colors is not None and colors.light else "uv")
+
 
 @dataclass
 class ExtractionSettings:
+    light: str = "uv"  # "uv": fluorescent markers (this module); "normal": coloured dots (.colordots)
     threshold: float = 60.0  # on max(R, G, B), 0..255
     min_area: int = 4  # pixels; smaller markers are specks
     marker_diameter_px: float = 6.0  # merge distance for fragments of one marker
     pale_saturation: float = 0.2  # blob test: paler than this ...
     max_elongation: float = 2.0  # ... and longer than this many times its width is not a marker
     split_pale_blobs: bool = False  # split such a blob by per-pixel class and keep its saturated parts
+    # normal light (.colordots)
+    min_difference: int = 20  # levels in some channel from the local background (first cut)
+    min_contrast: float = 0.05  # chromaticity distance from the local background
+    min_value: float = 20.0  # darker pixels have no reliable colour
+    background_px: float = 24.0  # median window of the local background, pixels
+    max_class_distance: float = 0.12  # chromaticity distance to the nearest class sample
+    max_streak: float = 3.0  # axis ratio above which a blob is a streak, not a dot
 
-
-@dataclass
-class Detections:
-    """Markers found in one frame (arrays of equal length)."""
-
-    x: np.ndarray
-    y: np.ndarray
-    color: np.ndarray  # class index
-    area: np.ndarray  # pixels
-    intensity: np.ndarray  # mean max(R, G, B) over the marker's pixels
-    rgb: np.ndarray = None  # (n, 3) mean colour, normalised to sum 1
-    elongation: np.ndarray = None  # (n,) axis ratio from the weighted second moments (1: round)
-
-    def __len__(self):
-        return self.x.size
+    def __post_init__(self):
+        if self.light not in LIGHTS:
+            raise InputError(f"light must be one of {', '.join(LIGHTS)}, not {self.light!r}")
 
 
 class MarkerExtractor:
@@ -197,7 +232,7 @@ class MarkerExtractor:
         # work inside the bounding box of the foreground only (one pass in C)
         x0, y0, bw, bh = cv2.boundingRect(self._mask)
         if bw == 0 or bh == 0:
-            return _empty()
+            return empty_detections()
         roi = self._mask[y0:y0 + bh, x0:x0 + bw]
         labels = self._labels16[:bh, :bw]
         try:  # 16-bit labels halve the memory traffic; noisy frames can need 32 bits
@@ -208,7 +243,7 @@ class MarkerExtractor:
             labels = self._labels[:bh, :bw]
             n, _ = cv2.connectedComponents(roi, labels, 8, cv2.CV_32S)
         if n <= 1:
-            return _empty()
+            return empty_detections()
         idx = np.flatnonzero(self._mask.view(np.bool_))
         ys, xs = np.divmod(idx, w)
         lab = labels[ys - y0, xs - x0].astype(np.intp)
@@ -280,13 +315,19 @@ def _blob_shape(sums):
     return cx, cy, elongation, rgb, 1.0 - 3.0 * rgb.min(axis=1)
 
 
+def marker_extractor(colors: ColorClasses, settings: ExtractionSettings | None = None):
+    """The extractor of the settings' light: :class:`MarkerExtractor` (UV) or
+    :class:`.colordots.ColorDotExtractor` (normal light); call it on each 8-bit BGR frame."""
+    settings = settings or ExtractionSettings()
+    if settings.light == "normal":
+        from .colordots import ColorDotExtractor
+
+        return ColorDotExtractor(colors, settings)
+    return MarkerExtractor(colors, settings)
+
+
 def extract_markers(frame_bgr: np.ndarray, colors: ColorClasses,
                     settings: ExtractionSettings | None = None) -> Detections:
-    """Find the markers in one 8-bit BGR frame (section 5.2, see module docstring).
-    For a stream of frames keep one :class:`MarkerExtractor` instead."""
-    return MarkerExtractor(colors, settings)(frame_bgr)
-
-
-def _empty() -> Detections:
-    return Detections(np.zeros(0), np.zeros(0), np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0),
-                      np.zeros((0, 3)), np.zeros(0))
+    """Find the markers in one 8-bit BGR frame (section 5.2, see module docstring; normal light:
+    :mod:`.colordots`). For a stream of frames keep one :func:`marker_extractor` instead."""
+    return marker_extractor(colors, settings)(frame_bgr)

@@ -77,7 +77,8 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
 
     _check_camera(camera, source)
     t0 = time.perf_counter()
-    stream = DetectionStream(source, colors or ColorClasses.default(), extraction or ExtractionSettings(), layout,
+    extraction = extraction or ExtractionSettings()
+    stream = DetectionStream(source, colors or ColorClasses.default(extraction.light), extraction, layout,
                              start, end, step, progress)
     numbers, frames = collect_detections(stream)
     t_detect = time.perf_counter() - t0

@@ -1,0 +1,143 @@
+"""Coloured dots on skin under normal light (issue #21, part 1).
+
+Under ordinary lamps nothing glows: a dot is a patch whose *colour* differs from the skin
+around it, and its brightness follows the shading, the highlights and the skin tone. So the
+extraction works in chromaticity -- normalised rgb ``(R, G, B) / (R + G + B)``, which does not
+change when a lamp dims or a surface turns away from it -- against the *local* background:
+
+1. **local background** -- the frame shrunk 4x (area average), median-filtered over
+   ``background_px`` (a dot is far smaller than that, so the median is the skin around it),
+   and enlarged back; its chromaticity ``c_bg`` per pixel;
+2. **contrast** -- ``|c - c_bg|`` per pixel, where ``c`` is the pixel's chromaticity; pixels
+   with contrast above ``min_contrast`` and brightest channel above ``min_value`` (too dark a
+   pixel has no reliable colour) are candidate dot pixels. Only pixels that differ from the
+   background by more than ``min_difference`` levels in some channel, averaged over 3x3 pixels,
+   are looked at (a cheap first cut: a dot differs from skin by far more);
+3. **connected components** (8-connected, OpenCV) of the candidate pixels; each blob's
+   chromaticity is the mean of its pixels' weighted by ``contrast - min_contrast`` (the dot's
+   centre, not its edge blended with skin, decides) and so is its **sub-pixel centre**;
+4. **colour class** -- 1-NN of the blob's chromaticity among the class samples (COLORS.json,
+   as under UV light); a blob farther than ``max_class_distance`` from every class is no dot
+   (lips, eyebrows, shadows in the eye corners, the rim of the face against the room);
+5. **merge** fragments of one dot (same class, centres closer than half of
+   ``marker_diameter_px``: no interlaced fields break a dot here, and two neighbouring dots of
+   one colour at the face's silhouette must stay two) and drop **specks** under ``min_area``
+   pixels;
+6. **shape test** -- a blob longer than ``max_streak`` times its width (weighted second
+   moments) is a streak (a specular edge, a crease), not a dot; foreshortened dots near the
+   face's silhouette stay under it.
+
+The output is the UV extractor's :class:`~.detections.Detections` (``intensity`` is the blob's
+mean brightest channel), so everything downstream -- views, DETECTIONS.csv, tracking -- is
+shared. Default classes: the four matte sticker colours of the normal-light sample clips
+(blue, green, yellow, magenta: :data:`.markers.NORMAL_LIGHT_CLASSES`); ``mirrorcap colors learn
+--light normal`` learns others.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..common.errors import InputError
+from .detections import Detections, empty_detections
+
+BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times smaller
+
+
+class ColorDotExtractor:
+    """The normal-light extractor for a stream of same-sized frames: call it with an 8-bit BGR
+    frame, get :class:`~.detections.Detections` (see the module text for the steps)."""
+
+    def __init__(self, colors, settings):
+        import cv2
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+        from scipy.spatial import cKDTree
+
+        self.colors, self.settings = colors, settings
+        self._mask = None
+        self._libs = (cv2, coo_matrix, connected_components, cKDTree)
+
+    def _background(self, frame):
+        """Per-pixel local background colour (8-bit BGR), from the shrunk, median-filtered frame."""
+        cv2 = self._libs[0]
+        h, w = frame.shape[:2]
+        small = cv2.resize(frame, (max(w // BACKGROUND_SHRINK, 1), max(h // BACKGROUND_SHRINK, 1)),
+                           interpolation=cv2.INTER_AREA)
+        k = int(round(self.settings.background_px / BACKGROUND_SHRINK)) | 1
+        med = cv2.medianBlur(small, max(k, 3))
+        return cv2.resize(med, (w, h), interpolation=cv2.INTER_LINEAR)
+
+    def candidates(self, frame_bgr: np.ndarray):
+        """Step 2: ``(idx, contrast, value)`` of the candidate dot pixels -- flat pixel indices,
+        their chromaticity distance ``|c - c_bg|`` from the local background and their brightest
+        channel. Only pixels whose colour differs from the background by ``min_difference`` levels
+        in some channel, averaged over 3x3 pixels, are looked at (a fast first cut; a dot differs
+        from skin by far more)."""
+        cv2 = self._libs[0]
+        s = self.settings
+        bg = self._background(frame_bgr)
+        diff = cv2.absdiff(cv2.blur(frame_bgr, (3, 3)), bg)        # 3x3: sensor noise is no dot
+        planes = cv2.split(diff)
+        dmax = cv2.max(cv2.max(planes[0], planes[1]), planes[2])
+        idx = np.flatnonzero(dmax > s.min_difference)
+        px = frame_bgr.reshape(-1, 3).take(idx, axis=0).astype(np.float32)
+        pb = bg.reshape(-1, 3).take(idx, axis=0).astype(np.float32)
+        c = px / np.maximum(px.sum(axis=1, keepdims=True), 1.0) - pb / np.maximum(pb.sum(axis=1, keepdims=True), 1.0)
+        contrast = np.sqrt((c * c).sum(axis=1))
+        value = px.max(axis=1)
+        ok = (contrast > s.min_contrast) & (value >= s.min_value)
+        return idx[ok], contrast[ok], value[ok], px[ok]
+
+    def __call__(self, frame_bgr: np.ndarray):
+        cv2, coo_matrix, connected_components, cKDTree = self._libs
+        s = self.settings
+        if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
+            raise InputError("frames must be 8-bit BGR images")
+        idx, contrast, value, bgr = self.candidates(frame_bgr)
+        if idx.size == 0:
+            return empty_detections()
+        h, w = frame_bgr.shape[:2]
+        if self._mask is None or self._mask.shape != (h, w):
+            self._mask = np.zeros((h, w), np.uint8)
+        mask = self._mask
+        mask.fill(0)
+        mask.ravel()[idx] = 1
+        n, labels = cv2.connectedComponents(mask, None, 8, cv2.CV_32S)
+        ys, xs = np.divmod(idx, w)
+        lab = labels.ravel().take(idx) - 1
+        wgt = contrast - s.min_contrast
+        chroma = bgr[:, ::-1] / np.maximum(bgr.sum(axis=1, keepdims=True), 1.0)      # r, g, b
+        m = n - 1
+        sums = np.stack([np.bincount(lab, wgt, m), np.bincount(lab, wgt * xs, m), np.bincount(lab, wgt * ys, m),
+                         np.bincount(lab, None, m), np.bincount(lab, value, m),
+                         *(np.bincount(lab, wgt * chroma[:, c], m) for c in range(3)),
+                         np.bincount(lab, wgt * xs * xs, m), np.bincount(lab, wgt * ys * ys, m),
+                         np.bincount(lab, wgt * xs * ys, m)], axis=1)
+        sums = sums[sums[:, 0] > 0]
+        cls = self.colors.classify(sums[:, 5:8])
+        if sums.shape[0] > 1 and s.marker_diameter_px > 0:                           # step 5: fragments
+            cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
+            pairs = cKDTree(np.c_[cx, cy]).query_pairs(0.5 * s.marker_diameter_px, output_type="ndarray")
+            if pairs.size:
+                pairs = pairs[cls[pairs[:, 0]] == cls[pairs[:, 1]]]
+            if pairs.size:
+                k = sums.shape[0]
+                graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(k, k))
+                ng, group = connected_components(graph, directed=False)
+                merged = np.zeros((ng, sums.shape[1]))
+                np.add.at(merged, group, sums)
+                sums = merged
+                cls = self.colors.classify(sums[:, 5:8])
+        W = sums[:, 0]
+        cx, cy = sums[:, 1] / W, sums[:, 2] / W
+        rgb = sums[:, 5:8] / W[:, None]
+        rgb = rgb / np.maximum(rgb.sum(axis=1, keepdims=True), 1e-12)
+        sxx, syy = sums[:, 8] / W - cx * cx, sums[:, 9] / W - cy * cy
+        sxy = sums[:, 10] / W - cx * cy
+        half, root = 0.5 * (sxx + syy), np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+        elongation = np.sqrt((half + root + 1.0 / 12.0) / (np.maximum(half - root, 0.0) + 1.0 / 12.0))
+        keep = ((self.colors.distance(rgb) <= s.max_class_distance) & (sums[:, 3] >= s.min_area)
+                & (elongation <= s.max_streak))
+        return Detections(x=cx[keep], y=cy[keep], color=cls[keep], area=sums[keep, 3].astype(int),
+                          intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep])
