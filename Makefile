@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cat requirements.txt requirements-dev.txt pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench sample head rig-clip stress-clips extension contact-sheet clean venv
+.PHONY: demo test bench sample head rig-clip stress-clips normal-clips extension contact-sheet clean venv
 
 venv: $(STAMP)
 
@@ -55,3 +55,12 @@ stress-clips: $(STAMP)
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/motion --head-deg 10 15 4 --tempo 2.5 --samples 4 \
 		--frames 300 --seed 12 --no-scan
+
+# The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
+# (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps. About 35 minutes.
+normal-clips: $(STAMP)
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
+		--seed 21 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin dark --markers 180 --head-deg 8 10 4 \
+		--out sample_scenes/normal/dark --frames 120 --seed 22 --no-scan
+

@@ -176,6 +176,7 @@ def run_track_command_benchmark(n_frames: int = 600, repeats: int = 3, progress=
 
 
 STRESS_CLIPS = Path(__file__).resolve().parents[1] / "sample_scenes" / "stress"
+NORMAL_CLIPS = Path(__file__).resolve().parents[1] / "sample_scenes" / "normal"   # issue #21
 
 
 def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> dict:
@@ -187,6 +188,7 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
     import json
     import tempfile
 
+    from mirrorcap.core.capture.markers import ExtractionSettings
     from mirrorcap.core.capture.rig import load_rig_views
     from mirrorcap.core.capture.video import open_source
     from mirrorcap.core.geometry.camera import Camera
@@ -194,20 +196,24 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
     from mirrorcap.core.track.pipeline import run_track
     from mirrorcap.synthetic.evaluate import score_take
 
-    folders = sorted(p for p in (STRESS_CLIPS.iterdir() if clips is None else map(Path, clips))
-                     if (p / "clip.mp4").is_file() and (p / "truth.npz").is_file())
+    default = [*sorted(STRESS_CLIPS.iterdir()), *sorted(NORMAL_CLIPS.iterdir())] if NORMAL_CLIPS.is_dir() else \
+        sorted(STRESS_CLIPS.iterdir())
+    folders = [p for p in (default if clips is None else map(Path, clips))
+               if (p / "clip.mp4").is_file() and (p / "truth.npz").is_file()]
     out = {}
     for clip in folders:
         camera = Camera.from_dict(json.loads((clip / "camera.json").read_text()))
         truth = np.load(clip / "truth.npz")
         source = open_source(clip / "clip.mp4")
         layout = load_rig_views(clip / "rig.json")
+        made = json.loads((clip / "clip.json").read_text()) if (clip / "clip.json").is_file() else {}
+        light = made.get("light", "uv")                # the normal-light clips of issue #21 say "normal"
         times, reports = [], []
         with tempfile.TemporaryDirectory() as tmp:
             for _ in range(repeats):
                 t0 = time.perf_counter()
                 reports.append(run_track(source, camera, Path(tmp) / "take.c3d", report=Path(tmp) / "take.json",
-                                         layout=layout))
+                                         layout=layout, extraction=ExtractionSettings(light=light)))
                 times.append(time.perf_counter() - t0)
             take = read_c3d(Path(tmp) / "take.c3d")
         F = take["points"].shape[0]
@@ -231,7 +237,8 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
             r.update({"seen_marker_frames": s["seen_marker_frames"],
                       "seen_reported_fraction": s["seen_reported_fraction"],
                       "never_tracked": len(s["never_tracked"])})
-        out[clip.name] = r
+        r["light"] = light
+        out[clip.name if light == "uv" else f"normal-light {clip.name}"] = r
         progress(f"  {clip.name}: {r['frames_per_s']:.0f} frames/s, {r['markers']} markers, RMS {r['rms_mm']:.3f} "
                  f"mm (max {r['max_mm']:.2f}), {r['identity_switches']} switches, "
                  f"{100 * r.get('seen_reported_fraction', float('nan')):.1f} % of seen marker-frames reported")

@@ -7,12 +7,15 @@ scale, so identities are found in the image:
 1. each tracked marker's true identity is the majority, over the frames where it was
    measured, of the true marker whose projection is nearest to its own (within
    ``match_px``);
-2. an identity switch is a measured marker-frame whose nearest true marker is another
-   one (``off_marker`` counts those nearest their own true marker but more than
-   ``match_px`` from it: the right marker, measured badly -- an error, not a switch);
-3. one similarity transform (Umeyama), fitted over every measured marker-frame of the
+2. one similarity transform (Umeyama), fitted over every measured marker-frame of the
    clip, brings the take onto the truth; the 3D error is what remains, in truth units (mm).
    Conjectured points are scored separately under the same transform.
+3. an identity switch is a measured marker-frame that lies nearer another true marker than
+   its own, in 3D after the alignment (the 3D test: in one camera's image, two markers seen
+   only in a mirror near the face's silhouette can project within 2 px of each other while
+   22 mm apart). ``identity_switches_image`` counts the same in the direct camera's image, and
+   ``off_marker`` those nearest their own true marker in the image but more than ``match_px``
+   from it: the right marker, measured badly -- an error, not a switch.
 4. completeness: ``split_markers`` counts true markers that carry two or more of the take's
    labels. With ``seen (F, N)`` (the true marker is seen in the direct view and at least one
    mirror, e.g. ``truth.npz``'s ``visible``), ``seen_reported_fraction`` is the share of those
@@ -57,7 +60,7 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
         v = nearest[measured[:, m] & (near_px[:, m] <= match_px), m]
         if v.size:
             ids[m] = np.bincount(v).argmax()
-    switches = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest != ids[None, :])))
+    switches_image = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest != ids[None, :])))
     off_marker = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest == ids[None, :])
                                       & (near_px > match_px)))
     ok = measured & (ids[None, :] >= 0)
@@ -67,6 +70,13 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
     s, R, t = similarity_fit(P[f_idx, m_idx], T[f_idx, ids[m_idx]])
     aligned = s * P @ R.T + t
     err = np.linalg.norm(aligned - T[:, np.maximum(ids, 0)], axis=2)
+    nearest_3d = np.full((F, M), -1)
+    for f in range(F):
+        idx = np.flatnonzero(measured[f] & (ids >= 0))
+        present = np.flatnonzero(np.all(np.isfinite(T[f]), axis=1))
+        if idx.size and present.size:
+            nearest_3d[f, idx] = present[cKDTree(T[f, present]).query(aligned[f, idx])[1]]
+    switches = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest_3d != ids[None, :])))
     e = err[ok]
     cj = conj & reported & (ids[None, :] >= 0)
     ce = err[cj]
@@ -90,7 +100,7 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
     return {
         **completeness,
         "markers_tracked": M, "markers_true": N, "markers_matched": int(np.count_nonzero(ids >= 0)),
-        "identity_switches": switches, "off_marker": off_marker, "measured_marker_frames": int(measured.sum()),
+        "identity_switches": switches, "identity_switches_image": switches_image, "off_marker": off_marker, "measured_marker_frames": int(measured.sum()),
         "reported_fraction": float(reported.mean()),
         "rms_mm": float(np.sqrt(np.mean(e ** 2))), "p95_mm": float(np.percentile(e, 95)), "max_mm": float(e.max()),
         "conjectured": int(cj.sum()),

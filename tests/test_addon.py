@@ -89,7 +89,7 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     assert res.returncode == 0, res.stdout + res.stderr
     out = json.loads(res.stdout.split("RESULT ", 1)[1])
     assert out["install"] == ["FINISHED"] and out["enabled"]
-    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 15
+    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 16
     assert len(out["panels"]) == 6
     assert out["marker_size"] == 2                   # AddonPreferences.bl_idname is the extension's package
     assert out["head"] == ["FINISHED"] and out["vertices"] == 4608 and out["keys"] == 53
@@ -210,3 +210,6 @@ def test_take_operators_stabilize_and_marker_map(tmp_path):
     assert out["retarget"] == ["FINISHED"] and out["retarget_keyed"] == 52
     assert out["retarget_jaw_max"] > 0.05 and out["csv_rows"] == 21
     assert out["retarget_self"][0] == "ERROR"
+    assert out["export_faps"] == ["FINISHED"] and out["fap_lines"] == 1 + 2 * 20
+    assert out["play_fap"] == ["FINISHED"] and out["play_fap_keys"] == 1 + 52 + 20
+    assert out["play_bad"][0] == "ERROR" and "68 bits" in out["play_bad"][1] and out["play_bad_unchanged"]

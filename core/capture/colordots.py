@@ -9,16 +9,24 @@ change when a lamp dims or a surface turns away from it -- against the *local* b
    ``background_px`` (a dot is far smaller than that, so the median is the skin around it),
    and enlarged back; its chromaticity ``c_bg`` per pixel;
 2. **contrast** -- ``|c - c_bg|`` per pixel, where ``c`` is the pixel's chromaticity; pixels
-   with contrast above ``min_contrast`` and brightest channel above ``min_value`` (too dark a
-   pixel has no reliable colour) are candidate dot pixels. Only pixels that differ from the
+   with contrast above ``min_contrast`` and brightest channel above ``min_value`` and above
+   ``min_value_ratio`` of the background's (too dark a pixel -- the shadow a dot casts, the
+   inside of the mouth -- has no reliable colour) are candidate dot pixels. Only pixels that differ from the
    background by more than ``min_difference`` levels in some channel, averaged over 3x3 pixels,
    are looked at (a cheap first cut: a dot differs from skin by far more);
 3. **connected components** (8-connected, OpenCV) of the candidate pixels; each blob's
    chromaticity is the mean of its pixels' weighted by ``contrast - min_contrast`` (the dot's
    centre, not its edge blended with skin, decides) and so is its **sub-pixel centre**;
-4. **colour class** -- 1-NN of the blob's chromaticity among the class samples (COLORS.json,
-   as under UV light); a blob farther than ``max_class_distance`` from every class is no dot
-   (lips, eyebrows, shadows in the eye corners, the rim of the face against the room);
+4. **colour class** -- by hue: the class (COLORS.json, as under UV light) whose samples' mean
+   hue is nearest the blob's; a blob more than ``max_hue_deg`` from every class, or paler than
+   ``min_saturation``, is no dot (lips, eyebrows, shadows in the eye corners, the rim of the
+   face against the room). Hue, unlike the chromaticity itself, holds when a dot darkens in a
+   mirror or turns from the lamp (video's halved colour resolution also shifts a small dot's
+   chromaticity toward the skin, its hue far less). The blob's hue must also be nearer its
+   class's than the skin's around it, and its mean chromaticity at least ``min_dot_contrast``
+   from the skin's (a shadow or the inside of the mouth has the skin's hue). With
+   ``max_hue_deg >= 180`` (learning classes, when there are none yet) any blob whose hue is
+   :data:`LEARN_FROM_SKIN_DEG` from the skin's counts;
 5. **merge** fragments of one dot (same class, centres closer than half of
    ``marker_diameter_px``: no interlaced fields break a dot here, and two neighbouring dots of
    one colour at the face's silhouette must stay two) and drop **specks** under ``min_area``
@@ -42,6 +50,16 @@ from ..common.errors import InputError
 from .detections import Detections, empty_detections
 
 BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times smaller
+LEARN_FROM_SKIN_DEG = 15.0  # learning classes: a dot's hue differs from the skin around it by this much
+
+
+def hue_saturation(rgb) -> tuple:
+    """Hue angle (radians) and saturation ``1 - 3 min`` of colours ``(n, 3)`` after normalising
+    them to sum 1."""
+    rgb = np.asarray(rgb, dtype=float).reshape(-1, 3)
+    s = rgb.sum(axis=1, keepdims=True)
+    r, g, b = (rgb / np.where(s > 0, s, 1.0)).T
+    return np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b), 1.0 - 3.0 * np.minimum(np.minimum(r, g), b)
 
 
 class ColorDotExtractor:
@@ -56,6 +74,7 @@ class ColorDotExtractor:
 
         self.colors, self.settings = colors, settings
         self._mask = None
+        self._ones = np.ones((1, 3), np.float32)
         self._libs = (cv2, coo_matrix, connected_components, cKDTree)
 
     def _background(self, frame):
@@ -71,30 +90,35 @@ class ColorDotExtractor:
     def candidates(self, frame_bgr: np.ndarray):
         """Step 2: ``(idx, contrast, value)`` of the candidate dot pixels -- flat pixel indices,
         their chromaticity distance ``|c - c_bg|`` from the local background and their brightest
-        channel. Only pixels whose colour differs from the background by ``min_difference`` levels
-        in some channel, averaged over 3x3 pixels, are looked at (a fast first cut; a dot differs
-        from skin by far more)."""
+        channel. Only pixels whose colour differs from the background by more than
+        ``min_difference`` levels in some channel, averaged over 3x3 pixels, are looked at (a fast
+        first cut; a dot differs from skin by far more)."""
         cv2 = self._libs[0]
         s = self.settings
         bg = self._background(frame_bgr)
         diff = cv2.absdiff(cv2.blur(frame_bgr, (3, 3)), bg)        # 3x3: sensor noise is no dot
-        planes = cv2.split(diff)
-        dmax = cv2.max(cv2.max(planes[0], planes[1]), planes[2])
-        idx = np.flatnonzero(dmax > s.min_difference)
+        total = cv2.transform(diff, self._ones)                     # sum over the channels, saturating
+        idx = np.flatnonzero(total > s.min_difference)              # a superset of ...
+        idx = idx[diff.reshape(-1, 3).take(idx, axis=0).max(axis=1) > s.min_difference]   # ... some channel over
         px = frame_bgr.reshape(-1, 3).take(idx, axis=0).astype(np.float32)
         pb = bg.reshape(-1, 3).take(idx, axis=0).astype(np.float32)
-        c = px / np.maximum(px.sum(axis=1, keepdims=True), 1.0) - pb / np.maximum(pb.sum(axis=1, keepdims=True), 1.0)
-        contrast = np.sqrt((c * c).sum(axis=1))
-        value = px.max(axis=1)
-        ok = (contrast > s.min_contrast) & (value >= s.min_value)
-        return idx[ok], contrast[ok], value[ok], px[ok]
+        b, g, r = px[:, 0], px[:, 1], px[:, 2]
+        bb, bg_g, br = pb[:, 0], pb[:, 1], pb[:, 2]
+        s_px = np.maximum(b + g + r, 1.0)
+        s_bg = np.maximum(bb + bg_g + br, 1.0)
+        d0, d1, d2 = b / s_px - bb / s_bg, g / s_px - bg_g / s_bg, r / s_px - br / s_bg
+        contrast = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        value = np.maximum(np.maximum(b, g), r)
+        ok = ((contrast > s.min_contrast) & (value >= s.min_value)
+              & (value >= s.min_value_ratio * np.maximum(np.maximum(bb, bg_g), br)))
+        return idx[ok], contrast[ok], value[ok], px[ok], pb[ok]
 
     def __call__(self, frame_bgr: np.ndarray):
         cv2, coo_matrix, connected_components, cKDTree = self._libs
         s = self.settings
         if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
             raise InputError("frames must be 8-bit BGR images")
-        idx, contrast, value, bgr = self.candidates(frame_bgr)
+        idx, contrast, value, bgr, bg = self.candidates(frame_bgr)
         if idx.size == 0:
             return empty_detections()
         h, w = frame_bgr.shape[:2]
@@ -107,15 +131,19 @@ class ColorDotExtractor:
         ys, xs = np.divmod(idx, w)
         lab = labels.ravel().take(idx) - 1
         wgt = contrast - s.min_contrast
-        chroma = bgr[:, ::-1] / np.maximum(bgr.sum(axis=1, keepdims=True), 1.0)      # r, g, b
+        # r, g, b chromaticity of each pixel and of its background (column sums: numpy's reductions
+        # over a length-3 axis cost more than the arithmetic)
+        chroma = bgr[:, ::-1] / np.maximum(bgr[:, 0] + bgr[:, 1] + bgr[:, 2], 1.0)[:, None]
+        bg_chroma = bg[:, ::-1] / np.maximum(bg[:, 0] + bg[:, 1] + bg[:, 2], 1.0)[:, None]
         m = n - 1
         sums = np.stack([np.bincount(lab, wgt, m), np.bincount(lab, wgt * xs, m), np.bincount(lab, wgt * ys, m),
                          np.bincount(lab, None, m), np.bincount(lab, value, m),
                          *(np.bincount(lab, wgt * chroma[:, c], m) for c in range(3)),
                          np.bincount(lab, wgt * xs * xs, m), np.bincount(lab, wgt * ys * ys, m),
-                         np.bincount(lab, wgt * xs * ys, m)], axis=1)
+                         np.bincount(lab, wgt * xs * ys, m),
+                         *(np.bincount(lab, wgt * bg_chroma[:, c], m) for c in range(3))], axis=1)
         sums = sums[sums[:, 0] > 0]
-        cls = self.colors.classify(sums[:, 5:8])
+        cls = self.colors.by_hue(sums[:, 5:8])[0]
         if sums.shape[0] > 1 and s.marker_diameter_px > 0:                           # step 5: fragments
             cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
             pairs = cKDTree(np.c_[cx, cy]).query_pairs(0.5 * s.marker_diameter_px, output_type="ndarray")
@@ -128,16 +156,25 @@ class ColorDotExtractor:
                 merged = np.zeros((ng, sums.shape[1]))
                 np.add.at(merged, group, sums)
                 sums = merged
-                cls = self.colors.classify(sums[:, 5:8])
         W = sums[:, 0]
         cx, cy = sums[:, 1] / W, sums[:, 2] / W
         rgb = sums[:, 5:8] / W[:, None]
         rgb = rgb / np.maximum(rgb.sum(axis=1, keepdims=True), 1e-12)
+        blob_contrast = np.linalg.norm(rgb - sums[:, 11:14] / W[:, None], axis=1)
         sxx, syy = sums[:, 8] / W - cx * cx, sums[:, 9] / W - cy * cy
         sxy = sums[:, 10] / W - cx * cy
         half, root = 0.5 * (sxx + syy), np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
         elongation = np.sqrt((half + root + 1.0 / 12.0) / (np.maximum(half - root, 0.0) + 1.0 / 12.0))
-        keep = ((self.colors.distance(rgb) <= s.max_class_distance) & (sums[:, 3] >= s.min_area)
-                & (elongation <= s.max_streak))
+        cls, hue_diff, saturation = self.colors.by_hue(rgb)
+        hue, _ = hue_saturation(rgb)
+        bg_hue, _ = hue_saturation(sums[:, 11:14])
+        from_skin = np.degrees(np.abs(np.angle(np.exp(1j * (hue - bg_hue)))))
+        if s.max_hue_deg < 180.0:
+            hue_ok = (hue_diff <= s.max_hue_deg) & (hue_diff < from_skin)
+        else:                         # no classes yet (colors learn): any colour that is not the skin's
+            hue_ok = from_skin >= LEARN_FROM_SKIN_DEG
+        keep = (hue_ok & (saturation >= s.min_saturation) & (sums[:, 3] >= s.min_area)
+                & (elongation <= s.max_streak) & (blob_contrast >= s.min_dot_contrast))
         return Detections(x=cx[keep], y=cy[keep], color=cls[keep], area=sums[keep, 3].astype(int),
-                          intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep])
+                          intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep],
+                          contrast=blob_contrast[keep])

@@ -225,7 +225,7 @@ def learn_color_classes(source: VideoSource, n_classes: int, *, names=None, star
     one_class = ColorClasses.from_dict({"classes": [{"name": "any", "samples": [[1, 1, 1]]}]})
     extractor = marker_extractor(one_class, ExtractionSettings(light=light, threshold=threshold,
                                                                marker_diameter_px=marker_diameter_px,
-                                                               max_class_distance=np.inf))
+                                                               max_hue_deg=180.0))
     pooled = []
     for k, (_, frame) in enumerate(source.frames(start, end, step)):
         if k >= max_frames:

@@ -19,6 +19,7 @@ class Detections:
     intensity: np.ndarray  # mean max(R, G, B) over the marker's pixels
     rgb: np.ndarray = None  # (n, 3) mean colour, normalised to sum 1
     elongation: np.ndarray = None  # (n,) axis ratio from the weighted second moments (1: round)
+    contrast: np.ndarray = None  # (n,) normal light: the dot's chromaticity distance from the skin around it
 
     def __len__(self):
         return self.x.size

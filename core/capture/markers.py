@@ -146,13 +146,20 @@ class ColorClasses:
         d2 = (self.samples**2).sum(axis=1)[None, :] - 2.0 * nrgb @ self.samples.T
         return self.labels[np.argmin(d2, axis=1)]
 
-    def distance(self, rgb) -> np.ndarray:
-        """Distance ``(n,)`` in normalised rgb from colours ``(n, 3)`` to their nearest class sample."""
-        rgb = np.asarray(rgb, dtype=float)
-        s = rgb.sum(axis=1, keepdims=True)
-        nrgb = rgb / np.where(s > 0, s, 1.0)
-        d2 = ((nrgb[:, None, :] - self.samples[None]) ** 2).sum(axis=2)
-        return np.sqrt(d2.min(axis=1)) if d2.size else np.zeros(len(nrgb))
+    def by_hue(self, rgb) -> tuple:
+        """``(class (n,), hue difference in degrees (n,), saturation (n,))`` of colours ``(n, 3)``:
+        the class whose samples' mean hue is nearest (hue: the angle of the colour about the grey
+        axis, as in HSV; saturation ``1 - 3 min(r, g, b)`` of the normalised colour). Coloured
+        dots keep their hue when the light on them changes or a mirror darkens them."""
+        from .colordots import hue_saturation
+
+        hue, sat = hue_saturation(rgb)
+        s_hue, _ = hue_saturation(self.samples)
+        k = np.arange(len(self.names))
+        centre = np.angle(np.array([np.exp(1j * s_hue[self.labels == c]).mean() for c in k]))
+        diff = np.abs(np.angle(np.exp(1j * (hue[:, None] - centre[None]))))
+        best = np.argmin(diff, axis=1) if diff.size else np.zeros(len(hue), int)
+        return best, np.degrees(diff[np.arange(len(hue)), best]) if diff.size else np.zeros(0), sat
 
 
 def capture_light(light: str | None, colors: "ColorClasses | None" = None) -> str:
@@ -178,8 +185,11 @@ class ExtractionSettings:
     min_difference: int = 20  # levels in some channel from the local background (first cut)
     min_contrast: float = 0.05  # chromaticity distance from the local background
     min_value: float = 20.0  # darker pixels have no reliable colour
+    min_value_ratio: float = 0.45  # ... nor pixels this much darker than the skin around them (shadows)
     background_px: float = 24.0  # median window of the local background, pixels
-    max_class_distance: float = 0.12  # chromaticity distance to the nearest class sample
+    max_hue_deg: float = 35.0  # hue difference to the nearest class
+    min_saturation: float = 0.25  # a dot's colour is saturated (skin sits at ~0.2)
+    min_dot_contrast: float = 0.15  # a dot's mean chromaticity distance from the skin around it
     max_streak: float = 3.0  # axis ratio above which a blob is a streak, not a dot
 
     def __post_init__(self):

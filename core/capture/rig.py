@@ -51,21 +51,50 @@ class ViewLayout:
         return {"boundaries_x": list(self.boundaries)}
 
 
-def split_views_by_gaps(x, min_gap_px: float) -> ViewLayout:
+def split_views_by_gaps(x, min_gap_px: float, stray_fraction: float = 0.01, min_view_fraction: float = 0.1) -> ViewLayout:
     """The two widest gaps in the sorted x coordinates (pooled over frames) separate
-    mirror0 | direct | mirror1. Refuses when either gap is under ``min_gap_px``."""
+    mirror0 | direct | mirror1. A gap may hold a few stray detections (at most
+    ``stray_fraction`` of them: markers at the very edge of a view, an ear beside a mirror
+    image that nearly touches it); each view must keep ``min_view_fraction`` of the detections.
+    Within each gap the boundary is the middle of its widest empty stretch. Refuses when either
+    gap is under ``min_gap_px`` (with strays: under four times the typical span of as many
+    detections, so that evenly spread detections show no gap)."""
     xs = np.sort(np.asarray(x, dtype=float))
-    if xs.size < 6:
-        raise InputError(f"too few markers ({xs.size}) to split the direct and mirror views automatically")
+    n = xs.size
+    if n < 6:
+        raise InputError(f"too few markers ({n}) to split the direct and mirror views automatically")
     gaps = np.diff(xs)
-    idx = np.sort(np.argsort(gaps)[-2:])
-    if gaps[idx].min() < min_gap_px:
+    best = None
+    for strays in sorted({0, int(stray_fraction * n)}):
+        width = xs[strays + 1:] - xs[:n - strays - 1]          # gap k spans xs[k] .. xs[k + strays + 1]
+        floor = min_gap_px if strays == 0 else max(min_gap_px, 4.0 * float(np.median(width)))
+        order = np.argsort(width)[::-1][:200]
+        for a_i, a in enumerate(order):
+            for b in order[a_i + 1:]:
+                k0, k1 = sorted((int(a), int(b)))
+                if k1 <= k0 + strays + 1:                     # the two gaps overlap
+                    continue
+                parts = np.array([k0 + 1, k1 - k0 - strays - 1, n - k1 - strays - 1])
+                if parts.min() < min_view_fraction * n:
+                    continue
+                score = min(width[k0], width[k1]) / floor
+                if best is None or score > best[0] + 1e-9:
+                    best = (score, k0, k1, strays)
+                break                                         # b only gets narrower
+        if best is not None and best[3] == 0 and best[0] >= 1.0:
+            break                                             # clean gaps: no strays needed
+    if best is None or best[0] < 1.0:
+        w = np.sort(gaps)[-2:] if gaps.size >= 2 else gaps
         raise InputError(
             "cannot split the direct and mirror views automatically: no clear gap between them "
-            f"(widest gaps {gaps[idx[0]]:.1f} and {gaps[idx[1]]:.1f} px); give a rig file with --rig"
+            f"(widest gaps {w[0]:.1f} and {w[-1]:.1f} px); give a rig file with --rig"
         )
-    b = tuple(float((xs[i] + xs[i + 1]) / 2) for i in idx)
-    return ViewLayout(boundaries=b)
+    _, k0, k1, strays = best
+    bounds = []
+    for k in (k0, k1):
+        inner = k + int(np.argmax(gaps[k:k + strays + 1]))      # the widest empty stretch of the gap
+        bounds.append(float((xs[inner] + xs[inner + 1]) / 2))
+    return ViewLayout(boundaries=tuple(bounds))
 
 
 def load_rig_views(path) -> ViewLayout | None:

@@ -28,7 +28,8 @@ class TrackSettings:
     reacquire_mm: float = 3.0  # a marker back after a gap takes only a candidate with a like one this near
     # in the frame before or after (a marker's image lasts; a stray blob paired by chance seldom does)
     rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
-    min_measured_frames: int = 5  # a marker measured in fewer frames is not reported
+    min_measured_frames: int = 10  # a marker measured in fewer frames is not reported (a chain of chance
+    # pairings -- a direct blob with another marker's mirror image -- seldom lasts ten frames)
     min_measured_fraction: float = 0.25  # ... nor one this rarely measured that is lost for good (see keep_measured)
 
     @classmethod

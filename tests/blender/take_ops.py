@@ -115,4 +115,16 @@ out["retarget_keyed"] = len(curves)
 jaw = [fc for fc in curves if "jawOpen" in fc.data_path][0]
 out["retarget_jaw_max"] = max(k.co[1] for k in jaw.keyframe_points)
 out["csv_rows"] = len((work / "live.csv").read_text().splitlines())
+
+# 6. MPEG-4 FAPs: Export FAPs writes the take's FAPs; Play FAP File bakes them back onto the head
+s.take = str(work / "sparse.c3d")
+s.fap_file = str(work / "take.fap")
+out["export_faps"] = call(bpy.ops.mirrorcap.export_faps)
+out["fap_lines"] = len((work / "take.fap").read_text().splitlines())
+out["play_fap"] = call(bpy.ops.mirrorcap.bake, fap=str(work / "take.fap"))
+out["play_fap_keys"] = len(head.data.shape_keys.key_blocks)
+(work / "bad.fap").write_text("2.1 x 30 1\n1 0 1\n0 0\n")
+before = [kb.name for kb in head.data.shape_keys.key_blocks]
+out["play_bad"] = call(bpy.ops.mirrorcap.bake, fap=str(work / "bad.fap"))
+out["play_bad_unchanged"] = [kb.name for kb in head.data.shape_keys.key_blocks] == before
 print("RESULT " + json.dumps(out))
