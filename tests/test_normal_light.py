@@ -123,11 +123,12 @@ def test_a_normal_light_clip_is_tracked_with_no_user_input(tone, tmp_path, capsy
     seen = truth["visible"][:, 0] & (truth["visible"][:, 1] | truth["visible"][:, 2])
     s = score_take(data["points"], truth["points"], Camera.load(clip / "camera.json"),
                    conjectured=data["conjectured"], seen=seen)
-    assert s["identity_switches"] == 0 and s["split_markers"] <= 2
-    assert s["rms_mm"] < 0.5 and s["max_mm"] < 2.0                # 0.21 / 0.22 mm RMS, 1.7 / 1.3 mm max measured
-    # 91.9 % (light) and 95.7 % (dark) of the marker-frames seen in the direct view and a mirror are
-    # reported; the 98 % is not reached (lower-face markers the tracker loses: see the README)
-    assert s["seen_reported_fraction"] > 0.9, s["seen_reported_fraction"]
+    assert s["identity_switches"] == 0 and s["split_markers"] == 0
+    assert s["rms_mm"] < 0.5 and s["max_mm"] < 2.0                # 0.21 / 0.22 mm RMS, 1.7 / 1.5 mm max measured
+    assert s["conjectured_max_mm"] < 2.0                           # no reported point more than 2 mm off
+    # 97.7 % (light) and 98.3 % (dark) of the marker-frames seen in the direct view and a mirror are
+    # reported (91.9 and 95.7 % before 2D continuity and the both-mirror pairing of the midline)
+    assert s["seen_reported_fraction"] > 0.97, s["seen_reported_fraction"]
     assert json.loads(rep.read_text())["mirror_agreement"]["consistent"] is True
 
 

@@ -202,8 +202,11 @@ def conjecture_motion(motion, valid, neighbour_idx, neighbour_dist, kc: float = 
     return out, filled
 
 
+RELATION_CORRELATION = 0.5  # correlation of the errors of one marker's learned relations (see learned_conjectures)
+
+
 def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.0, min_frames: int = 10,
-                        block_values: int = 2_000_000):
+                        block_values: int = 2_000_000, correlation: float = 0.0):
     """Eq. 5.8 with the neighbour relations learned from the take (offline, whole take known).
 
     Eq. 5.8 assumes a hidden marker moves as its neighbours do (``v_i = v_j``, weighted by
@@ -222,8 +225,12 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
     ``motion`` ``(F, N, 3)`` (anything where not ``measured`` ``(F, N)``); returns
     ``(estimate (F, P, 3), variance (F, P))`` for the ``P`` markers of ``rows``: the
     estimate at every frame (measured or not, so that callers can compare it with the
-    measurements) and the variance of the weighted mean (mm^2); NaN and inf where no
-    related neighbour is measured. Markers are done in blocks of about ``block_values``
+    measurements) and the variance of the weighted mean (mm^2) -- the relations' errors taken
+    as correlated by ``correlation`` (0: independent; the tracker's gap filling uses
+    :data:`RELATION_CORRELATION`: the expression that hides a marker throws its neighbours'
+    relations off together, and taken as independent, 12 relations claimed a 0.5 mm error where
+    the sample clip's lower lip was 2-6 mm off); NaN and inf where no related neighbour is
+    measured. Markers are done in blocks of about ``block_values``
     numbers, so memory stays bounded on long takes."""
     measured = np.asarray(measured, bool)
     F, N = measured.shape
@@ -268,11 +275,15 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
         mean = (wdB + w.transpose(0, 2, 1) @ mean_i) / np.where(total > 0, total, 1.0)[..., None]
         have = total > 0
         est[:, lo:lo + P] = np.where(have[..., None], mean, np.nan).transpose(1, 0, 2)
-        var[:, lo:lo + P] = np.where(have, 1.0 / np.where(have, total, 1.0), np.inf).T
+        # the variance of the relations' weighted mean, their errors correlated by ``correlation``
+        used = (w > 0).sum(axis=1)                                   # (P, F) relations used
+        inflate = 1.0 + correlation * (used - 1)
+        var[:, lo:lo + P] = np.where(have, inflate / np.where(have, total, 1.0), np.inf).T
     return est, var
 
 
-def conjecture_gaps(motion, measured, gaps, neighbour_idx, ridge: float = 1.0, min_frames: int = 10):
+def conjecture_gaps(motion, measured, gaps, neighbour_idx, ridge: float = 1.0, min_frames: int = 10,
+                    correlation: float = 0.0):
     """Motions of the ``gaps`` cells ``(F, N)`` from the learned neighbour relations
     (:func:`learned_conjectures`), corrected to meet the measurements at the ends of each
     gap: the relations' error where the marker is ``measured`` is blended linearly in
@@ -288,7 +299,8 @@ def conjecture_gaps(motion, measured, gaps, neighbour_idx, ridge: float = 1.0, m
     if rows.size == 0:
         return out, sd
     motion = np.asarray(motion, float)
-    est, var = learned_conjectures(motion, measured, neighbour_idx, rows, ridge, min_frames)
+    est, var = learned_conjectures(motion, measured, neighbour_idx, rows, ridge, min_frames,
+                                   correlation=correlation)
     anchor = measured[:, rows] & np.isfinite(est[..., 0])
     off = np.where(anchor[..., None], motion[:, rows] - est, 0.0)  # the relations' error where measured
     corr = interpolate_in_time(off, anchor)  # blended across each gap from both ends

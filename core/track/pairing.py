@@ -178,12 +178,14 @@ def _presence(ids_per_frame):
     return m
 
 
-def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float = 1.0, min_frames: int = 5):
+def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float = 1.0, min_frames: int = 5,
+                  max_rms_factor: float = 2.0):
     """2D tracks of the direct view and of each mirror over the frames of ``det``, and each
     direct track's partner track per mirror (:func:`pair_tracks`; the band depends only on
     the mirrors' ``normals`` ``(K, 3)``, eq. 5.2). Returns ``(direct ids per frame, number of
     direct tracks, partner (K, n): -1 none, mirror ids per frame per mirror, ambiguous (K, n):
-    tracks with rival partners in that mirror, rms_px (K, n): each pair's band residual)``."""
+    tracks with rival partners in that mirror, rms_px (K, n): each pair's band residual)``.
+    ``max_rms_factor``: :func:`pair_tracks`'s RMS test (``inf``: none)."""
     dids, n_dt = track_2d(det.per_frame(0), det.per_frame(0, "colour"))
     K = len(normals)
     partner = np.full((K, n_dt), -1)
@@ -193,7 +195,7 @@ def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float =
     for k in range(K):
         mids, _ = track_2d(det.per_frame(k + 1), det.per_frame(k + 1, "colour"))
         pairs = pair_tracks(det, dids, k, mids, camera, MirrorPlane(normal=np.asarray(normals[k], float), d=-1.0),
-                            band_px=band_px, min_frames=min_frames)
+                            band_px=band_px, min_frames=min_frames, max_rms_factor=max_rms_factor)
         partner[k, pairs.direct_track] = pairs.mirror_track
         rms_px[k, pairs.direct_track] = pairs.rms_px
         ambiguous[k, pairs.ambiguous] = True

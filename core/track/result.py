@@ -16,8 +16,11 @@ class TrackSettings:
     gate_mm: float = 3.0  # largest distance between a marker's prediction and its candidate
     min_gate_mm: float = 0.5  # each marker's gate: 4x its recent innovation + 0.3 mm, within these
     init_frames: int = 15  # frames used to pair direct and mirror tracks
+    wide_band_factor: float = 2.0  # unpaired tracks: paired in a band this much wider when both mirrors agree in 3D
     neighbour_radius_mm: float = 25.0  # neighbours in the neutral face (eq. 5.6-5.8)
     false_threshold: float = 3.0  # JF above this is false tracking (eq. 5.6)
+    follow_2d_tracks: bool = True  # final pass: a marker's candidate on the 2D tracks of its last measurement
+    # (direct view and a mirror) is not judged by the neighbour test of eq. 5.6
     measure_sigma_mm: float = 0.1  # measurement noise for the marker filters
     conjecture_sigma_mm: float = 1.0  # conjectured positions are trusted less
     accel_sigma_mm: float = 1.0  # velocity change per frame, marker filters

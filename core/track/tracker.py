@@ -5,7 +5,10 @@ Steps, per the procedure:
 
 1. (given) camera and mirror planes -- from ``core.track.selfcal`` or ``mirrorcap mirrors``;
 2. the neutral structure at the first frame: markers are direct-view 2D tracks paired
-   with mirror tracks over the first ``init_frames`` frames (``core.track.pairing``);
+   with mirror tracks over the first ``init_frames`` frames (``core.track.pairing``); a
+   direct track left unpaired is paired in a band ``wide_band_factor`` times wider when both
+   mirrors then put it at the same 3D point (:func:`_confirm_by_both_mirrors`: the face's
+   midline, seen at a grazing angle in both mirrors);
 3-4. per frame, 3D candidates from the band (``core.track.candidates``);
 5. head motion: a robust rigid fit of the neutral structure to the tracked markers
    (iteratively reweighted, so expression motion counts little -- the idea of
@@ -13,8 +16,10 @@ Steps, per the procedure:
    adaptive Kalman filter on the six pose parameters of eq. 5.4-5.5;
 6. markers predicted by their own Kalman filters (eq. 4.1-4.2) in the head frame,
    assigned one-to-one to candidates within a gate; false tracking by the neighbour
-   test (eq. 5.6-5.7); conflicts (one 2D blob claimed twice) keep the marker closest
-   to its prediction;
+   test (eq. 5.6-5.7), except, in the final pass, for a candidate on the 2D tracks of the
+   marker's last measurement in the direct view and a mirror (:func:`_continuing`: the same
+   dot, though it moves unlike its neighbours -- a lip against the chin); conflicts (one 2D
+   blob claimed twice) keep the marker closest to its prediction;
 7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
    whole take known, again from relations to their neighbours learned over the take
    (``core.track.motion.learned_conjectures``), meeting the measurements at both ends of a gap;
@@ -24,6 +29,8 @@ Everything is vectorised over markers; the loop is over frames.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import time
 
@@ -37,6 +44,7 @@ from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
 from .late import add_late_markers
 from .motion import (
+    RELATION_CORRELATION,
     ConstantVelocityKalman,
     conjecture_gaps,
     conjecture_motion,
@@ -100,6 +108,41 @@ def _track_positions(det: ClipDetections, normals, ds, dids, n_dt, partner, mids
     return pos, blob, colour
 
 
+def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partner, wide, mids_all,
+                             factor: float = 3.0, floor_mm: float = 0.5):
+    """Direct tracks with no partner in any mirror (a marker on the face's midline is seen at a
+    grazing angle in both mirrors, its images noisier than most: it leaves the 1 px band too
+    often), paired in *each* mirror when the band is wider and the RMS test is off (``wide``,
+    :func:`.pairing.paired_tracks`): both partners are taken when the two mirrors put the marker
+    at the same 3D point -- their median distance over the window within ``factor`` times the
+    median of the markers both mirrors pair cleanly (at least ``floor_mm``), and neither mirror
+    track is another marker's partner. Chance alignments in two mirrors at once do not agree in
+    3D."""
+    taken = [set(partner[k][partner[k] >= 0].tolist()) for k in range(2)]
+    free = np.array([[m >= 0 and m not in taken[k] for m in wide[k]] for k in range(2)])
+    noisy = np.where(free, wide, -1)
+    cand = np.flatnonzero(np.all(partner < 0, axis=0) & np.all(noisy >= 0, axis=0))
+    both = np.flatnonzero(np.all(partner >= 0, axis=0))
+    if cand.size == 0 or both.size < 3:
+        return partner
+
+    def spread(tracks, mates):
+        """Per track, the median distance between its two single-mirror reconstructions."""
+        one = []
+        for k in range(2):
+            p_k = np.full_like(mates, -1)
+            p_k[k, tracks] = mates[k, tracks]
+            one.append(_track_positions(det, normals, ds, dids, n_dt, p_k, mids_all, tracks)[0])
+        with np.errstate(invalid="ignore"):
+            return np.nanmedian(np.linalg.norm(one[0] - one[1], axis=2), axis=0)
+
+    typical = float(np.nanmedian(spread(both, partner)))
+    agree = spread(cand, noisy) <= max(factor * typical, floor_mm)
+    partner = partner.copy()
+    partner[:, cand[agree]] = noisy[:, cand[agree]]
+    return partner
+
+
 def _initial_markers(det: ClipDetections, camera, normals, ds, settings):
     """Step 2: markers are direct-view tracks paired with a mirror track over the first
     ``init_frames`` frames. Each marker's neutral position is its 3D position at the
@@ -112,6 +155,10 @@ def _initial_markers(det: ClipDetections, camera, normals, ds, settings):
     init = det.head(W)
     dids, n_dt, partner, mids_all, ambiguous, _ = paired_tracks(init, camera, normals, settings.band_px,
                                                                min(5, W))
+    if settings.wide_band_factor > 1.0 and len(normals) == 2:
+        wide = paired_tracks(init, camera, normals, settings.wide_band_factor * settings.band_px, min(5, W),
+                             max_rms_factor=np.inf)[2]
+        partner = _confirm_by_both_mirrors(init, normals, ds, dids, n_dt, partner, wide, mids_all)
     undecided = _undecided(init, dids, n_dt, partner, ambiguous, min(5, W))
     undecided["blobs"] = [np.asarray(d, int) for d in dids]  # track id of each direct blob, per frame
     tracks = np.flatnonzero(np.any(partner >= 0, axis=0))
@@ -175,7 +222,8 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     by_image = isinstance(rigid, tuple)
     given = (rigid_by_image(camera, markers[1], markers[2], *rigid) if by_image
              else None if rigid is None else np.asarray(rigid, int))
-    first = _track_pass(det, cands, s, markers, given, None)
+    # the first pass leaves the blobs of markers it loses unclaimed: late markers come from them
+    first = _track_pass(det, cands, replace(s, follow_2d_tracks=False), markers, given, None)
     lap("first_pass")
     if given is None:
         with np.errstate(invalid="ignore"):  # markers never reported: no motion to rank
@@ -255,10 +303,15 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
        blended linearly across the gap. A gap still open at the end of the take keeps
        the pass's conjecture there.
     3. Each conjecture's expected error: the standard deviation of its learned estimate
-       (the relations' residuals) grown as a random walk with the frames to the nearest
+       (the relations' residuals, their errors correlated by
+       :data:`core.track.motion.RELATION_CORRELATION`) grown as a random walk with the frames to the nearest
        measurement of the marker, ``sd * sqrt(frames)`` (cells of step 2: the take's
        median ``sd``). A conjecture expected to be off by more than ``max_sd_mm`` is
-       withheld: the marker is left as a gap there (``stats["withheld"]`` per frame).
+       withheld: the marker is left as a gap there (``stats["withheld"]`` per frame), and so is
+       every frame of the gap further from the measurement it is nearest to (the error does not
+       shrink away from the measurements: the sample clip's lower lip, withheld 2-21 frames
+       after its last measurement at the end of the take, was 5.9 mm off at 23 frames, where
+       other neighbours' relations said 0.5 mm).
 
     Updates ``points``, ``head_frame`` and ``conjectured`` in place."""
     measured = result.assigned_blob >= 0
@@ -271,7 +324,8 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
     if rows.size == 0:
         return
     nidx, ndist = neighbours(result.neutral, radius_mm)
-    learned_motion, sd = conjecture_gaps(motion, measured, gaps, nidx[:, :learned_neighbours], ridge_mm2, min_frames)
+    learned_motion, sd = conjecture_gaps(motion, measured, gaps, nidx[:, :learned_neighbours], ridge_mm2, min_frames,
+                                         correlation=RELATION_CORRELATION)
     learned = np.isfinite(sd)
     new_motion = np.where(learned[..., None], learned_motion, motion)
 
@@ -304,12 +358,28 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
         frames_off = np.minimum(np.where(last >= 0, np.arange(F)[:, None] - last, F),
                                 np.where(nxt < F, nxt - np.arange(F)[:, None], F))
         expected = grown_sd(np.where(np.isnan(sd), typical, sd), frames_off)
-        withheld = gaps & (expected > max_sd_mm)
+        withheld = _withheld_onwards(gaps & (expected > max_sd_mm), measured, last, nxt) & gaps
         result.points[withheld] = np.nan
         result.head_frame[withheld] = np.nan
         result.conjectured[withheld] = False
         result.stats["withheld"] = withheld.sum(axis=1)
     result.stats["conjectured"] = result.conjectured.sum(axis=1)
+
+
+def _withheld_onwards(withheld, measured, last, nxt):
+    """``withheld (F, N)`` spread through each gap away from the measurement each frame is
+    nearest to (``last``/``nxt``: the frame of the previous/next measurement per cell, as
+    :func:`core.track.motion.previous_and_next` gives them; ``nxt == F``: none)."""
+    F = withheld.shape[0]
+    forward, backward = withheld.copy(), withheld.copy()
+    for t in range(1, F):
+        forward[t] |= forward[t - 1] & ~measured[t]
+    for t in range(F - 2, -1, -1):
+        backward[t] |= backward[t + 1] & ~measured[t]
+    frames = np.arange(F)[:, None]
+    after_last = np.where(last >= 0, frames - last, F)
+    before_next = np.where(nxt < F, nxt - frames, F)
+    return np.where(after_last <= before_next, forward, backward) & ~measured
 
 
 def _resolve_conflicts(a, near, keys):
@@ -334,6 +404,40 @@ def _resolve_conflicts(a, near, keys):
         lost[order[dup]] = True
         valid &= ~lost
     return lost
+
+
+def _candidate_tracks(det: ClipDetections, cands: ClipCandidates):
+    """The 2D track (:func:`.pairing.track_2d`, per view over the whole clip) of every clip
+    candidate's direct blob ``(C,)`` and mirror blobs ``(C, K)`` (-1: no blob in that mirror)."""
+    from .pairing import track_2d
+
+    K = cands.mirror_blob.shape[1]
+    ids = [np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
+           if len(det.xy[v]) else np.zeros(0, int) for v in range(K + 1)]
+    dtrack = ids[0][cands.direct] if len(cands.direct) else np.zeros(0, int)
+    mtrack = np.full(cands.mirror_blob.shape, -1)
+    for k in range(K):
+        has = cands.mirror_blob[:, k] >= 0
+        mtrack[has, k] = ids[k + 1][cands.mirror_blob[has, k]]
+    return dtrack, mtrack
+
+
+def _continuing(dtrack, mtrack, last_dtrack, last_mtrack) -> np.ndarray:
+    """Per marker, the frame's candidate (index into the frame's candidates; -1: none) whose
+    direct blob continues the 2D track of the marker's last measurement *and* whose blob in some
+    mirror continues that mirror's track: the same physical dot seen the same way, so the same
+    marker whatever its 3D motion. Several such candidates: the one sharing the most tracks."""
+    if dtrack.size == 0 or not (last_dtrack >= 0).any():
+        return np.full(len(last_dtrack), -1)
+    i, c = np.nonzero((dtrack[None, :] == last_dtrack[:, None]) & (last_dtrack[:, None] >= 0))
+    shared = ((mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)).sum(axis=1)
+    ok = shared > 0
+    i, c, shared = i[ok], c[ok], shared[ok]
+    out = np.full(len(last_dtrack), -1)
+    order = np.lexsort((-shared, i))                  # per marker, most shared tracks first
+    first = np.r_[True, i[order][1:] != i[order][:-1]]
+    out[i[order][first]] = c[order][first]
+    return out
 
 
 def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, rigid, progress) -> TrackResult:
@@ -368,6 +472,10 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
     keys = [cands.direct] + [cands.mirror_blob[:, k] for k in range(K)]
     view_bit = (2 ** np.arange(1, K + 1))[None, :]
     trees = {}
+    # 2D continuity: each candidate's direct and mirror blobs' 2D tracks (.pairing.track_2d)
+    cand_dtrack, cand_mtrack = _candidate_tracks(det, cands) if s.follow_2d_tracks else (None, None)
+    last_dtrack = np.full(N, -1)
+    last_mtrack = np.full((N, K), -1)
 
     def tree(u):
         """Frame ``u``'s candidates as a KD-tree (None: none), built once and kept while in use."""
@@ -390,7 +498,11 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             near, j = tree(t).query(query, distance_upper_bound=s.gate_mm)
             valid = (near <= gate_i) & (entry <= t)  # a late marker is measured from its first sighting on
             a = np.where(valid, j + sl.start, -1)
-            back = np.flatnonzero(valid & (last_frame < t - 1)) if t > 0 else np.zeros(0, int)
+            confirmed = np.zeros(N, bool)
+            if cand_dtrack is not None:
+                cont = _continuing(cand_dtrack[sl], cand_mtrack[sl], last_dtrack, last_mtrack) + sl.start
+                confirmed = valid & (a == cont)
+            back = np.flatnonzero(valid & ~confirmed & (last_frame < t - 1)) if t > 0 else np.zeros(0, int)
             if back.size:  # coming back after a gap: only to a candidate that lasts
                 lasts = np.zeros(back.size, bool)
                 for u in (t - 1, t + 1, t - 2, t + 2):
@@ -404,6 +516,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             valid &= ~lost
         else:
             valid, a, near = np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf)
+            confirmed = np.zeros(N, bool)
         meas_cam = cands.points[np.maximum(a, 0)] if len(cands.points) else np.zeros((N, 3))
         use = valid & is_rigid
         if use.sum() >= 4:
@@ -415,6 +528,9 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
         meas_h = (meas_cam - T) @ R  # R^T (x - T): head motion removed
         motion = np.where(valid[:, None], meas_h - neutral, 0.0)
         false, _ = false_tracking(motion, valid, nidx, threshold=s.false_threshold)
+        # a candidate on the 2D tracks (direct view and a mirror) the marker was last measured on is
+        # the same dot: its own, however its motion differs from its neighbours' (a lip against the chin)
+        false &= ~confirmed
         counts["false_tracking"][t] = false.sum()
         valid &= ~false
         motion[~valid] = np.nan
@@ -432,6 +548,10 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
         out_h = kf.update(z, np.where(valid, s.measure_sigma_mm, s.conjecture_sigma_mm), reported)
         last_motion[valid] = motion[valid]
         last_frame[valid] = t
+        if cand_dtrack is not None and valid.any():
+            last_dtrack[valid] = cand_dtrack[a[valid]]
+            seen_m = cand_mtrack[a[valid]]
+            last_mtrack[valid] = np.where(seen_m >= 0, seen_m, last_mtrack[valid])
         kf.velocity[~reported] = 0.0  # lost and not conjecturable: hold still rather than drift away
         out_h = np.where(reported[:, None], out_h, np.nan)
         head_frame[t] = out_h
