@@ -70,6 +70,14 @@ def _unseen_options(parser) -> None:
                              "(3 sigma) are left out")
 
 
+def _binding_options(parser) -> None:
+    """How a C3D take is bound to the actor's head (``retarget``, ``fap``)."""
+    parser.add_argument("--head-pose", help="REPORT.json of `mirrorcap track` (default: estimate the head motion)")
+    parser.add_argument("--marker-map", metavar="MAP.json", help="bind markers by name (as for bake)")
+    parser.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
+    _unseen_options(parser)
+
+
 def _bake_options(parser) -> None:
     parser.add_argument("--object", help="the head object's name (default: the only head in the file)")
     parser.add_argument("--mode", choices=("frames", "pca"), default="frames",
@@ -277,11 +285,8 @@ def _blender_commands(sub) -> None:
     ret.add_argument("-o", "--output", required=True, help="OUT.blend to write (the target file, animated)")
     ret.add_argument("--method", choices=("arkit",), default="arkit", help="arkit: ARKit-52 weights (default)")
     ret.add_argument("--csv", help="LIVELINK.csv to write (Live Link Face format)")
-    ret.add_argument("--head-pose", help="REPORT.json of `mirrorcap track` (default: estimate the head motion)")
-    ret.add_argument("--marker-map", metavar="MAP.json", help="bind markers by name (as for bake)")
-    ret.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
-    _unseen_options(ret)
-    ret.add_argument("--smoothness", type=float, help="temporal smoothness lambda in mm^2 (default 2)")
+    _binding_options(ret)
+    ret.add_argument("--smoothness", type=float, help="temporal smoothness lambda in mm^2 (default 8)")
     ret.add_argument("--report", help="RETARGET.json to write")
     ret.add_argument("-q", "--quiet", action="store_true")
     ret.set_defaults(func=commands.retarget)
@@ -296,10 +301,7 @@ def _blender_commands(sub) -> None:
                                                    "fp_<id> vertex groups)")
     fap.add_argument("--object", help="the head object's name (default: the only head in the file)")
     fap.add_argument("-o", "--output", required=True, help="TAKE.fap to write")
-    fap.add_argument("--head-pose", help="REPORT.json of `mirrorcap track` (default: estimate the head motion)")
-    fap.add_argument("--marker-map", metavar="MAP.json", help="bind markers by name (as for bake)")
-    fap.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
-    _unseen_options(fap)
+    _binding_options(fap)
     fap.add_argument("--no-high-level", action="store_true", help="leave FAP 1 (viseme) and 2 (expression) out")
     fap.add_argument("--report", help="FAP.json to write: feature points, FAPU, FAPs written")
     fap.add_argument("-q", "--quiet", action="store_true")

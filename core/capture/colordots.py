@@ -47,7 +47,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..common.errors import InputError
-from .detections import Detections, empty_detections
+from .detections import Detections, empty_detections, merge_fragments
 
 BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times smaller
 LEARN_FROM_SKIN_DEG = 15.0  # learning classes: a dot's hue differs from the skin around it by this much
@@ -68,18 +68,15 @@ class ColorDotExtractor:
 
     def __init__(self, colors, settings):
         import cv2
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-        from scipy.spatial import cKDTree
 
         self.colors, self.settings = colors, settings
         self._mask = None
         self._ones = np.ones((1, 3), np.float32)
-        self._libs = (cv2, coo_matrix, connected_components, cKDTree)
+        self._cv2 = cv2
 
     def _background(self, frame):
         """Per-pixel local background colour (8-bit BGR), from the shrunk, median-filtered frame."""
-        cv2 = self._libs[0]
+        cv2 = self._cv2
         h, w = frame.shape[:2]
         small = cv2.resize(frame, (max(w // BACKGROUND_SHRINK, 1), max(h // BACKGROUND_SHRINK, 1)),
                            interpolation=cv2.INTER_AREA)
@@ -93,7 +90,7 @@ class ColorDotExtractor:
         channel. Only pixels whose colour differs from the background by more than
         ``min_difference`` levels in some channel, averaged over 3x3 pixels, are looked at (a fast
         first cut; a dot differs from skin by far more)."""
-        cv2 = self._libs[0]
+        cv2 = self._cv2
         s = self.settings
         bg = self._background(frame_bgr)
         diff = cv2.absdiff(cv2.blur(frame_bgr, (3, 3)), bg)        # 3x3: sensor noise is no dot
@@ -114,7 +111,7 @@ class ColorDotExtractor:
         return idx[ok], contrast[ok], value[ok], px[ok], pb[ok]
 
     def __call__(self, frame_bgr: np.ndarray):
-        cv2, coo_matrix, connected_components, cKDTree = self._libs
+        cv2 = self._cv2
         s = self.settings
         if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
             raise InputError("frames must be 8-bit BGR images")
@@ -144,18 +141,7 @@ class ColorDotExtractor:
                          *(np.bincount(lab, wgt * bg_chroma[:, c], m) for c in range(3))], axis=1)
         sums = sums[sums[:, 0] > 0]
         cls = self.colors.by_hue(sums[:, 5:8])[0]
-        if sums.shape[0] > 1 and s.marker_diameter_px > 0:                           # step 5: fragments
-            cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
-            pairs = cKDTree(np.c_[cx, cy]).query_pairs(0.5 * s.marker_diameter_px, output_type="ndarray")
-            if pairs.size:
-                pairs = pairs[cls[pairs[:, 0]] == cls[pairs[:, 1]]]
-            if pairs.size:
-                k = sums.shape[0]
-                graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(k, k))
-                ng, group = connected_components(graph, directed=False)
-                merged = np.zeros((ng, sums.shape[1]))
-                np.add.at(merged, group, sums)
-                sums = merged
+        sums, _ = merge_fragments(sums, cls, 0.5 * s.marker_diameter_px)                 # step 5: fragments
         W = sums[:, 0]
         cx, cy = sums[:, 1] / W, sums[:, 2] / W
         rgb = sums[:, 5:8] / W[:, None]

@@ -28,3 +28,30 @@ class Detections:
 def empty_detections() -> Detections:
     return Detections(np.zeros(0), np.zeros(0), np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0),
                       np.zeros((0, 3)), np.zeros(0))
+
+
+def merge_fragments(sums, cls, radius_px: float):
+    """Blobs of one class whose centres lie within ``radius_px`` of each other are fragments of
+    one marker (interlaced fields, broken labelling): ``sums (n, k)`` of per-blob sums whose
+    columns 0-2 are the weight and the weighted x and y, ``cls (n,)`` their classes. Returns the
+    merged sums (rows added up; scipy's KD-tree and graph components) and each blob's group
+    ``(n,)``, or the input and ``None`` when nothing merges."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    if sums.shape[0] < 2 or radius_px <= 0:
+        return sums, None
+    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
+    pairs = cKDTree(np.c_[cx, cy]).query_pairs(radius_px, output_type="ndarray")
+    if pairs.size:
+        pairs = pairs[cls[pairs[:, 0]] == cls[pairs[:, 1]]]
+    if not pairs.size:
+        return sums, None
+    n = sums.shape[0]
+    k, group = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)),
+                                    directed=False)
+    merged = np.zeros((k, sums.shape[1]))
+    np.add.at(merged, group, sums)
+    return merged, group
+

@@ -57,7 +57,7 @@ import numpy as np
 
 from ..common.errors import InputError
 from ..common.files import read_json
-from .detections import Detections, empty_detections
+from .detections import Detections, empty_detections, merge_fragments
 
 LIGHTS = ("uv", "normal")  # fluorescent markers under black light; coloured dots under ordinary lamps
 
@@ -209,13 +209,9 @@ class MarkerExtractor:
         self.colors = colors
         self.settings = settings or ExtractionSettings()
         self._shape = None
-        # imported once here: a `from scipy.sparse import ...` per frame costs ~0.5 ms
         import cv2
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-        from scipy.spatial import cKDTree
 
-        self._libs = (cv2, coo_matrix, connected_components, cKDTree)
+        self._cv2 = cv2
 
     def _buffers(self, shape):
         if self._shape != shape:
@@ -228,7 +224,7 @@ class MarkerExtractor:
             self._shape = shape
 
     def __call__(self, frame_bgr: np.ndarray) -> Detections:
-        cv2, coo_matrix, connected_components, cKDTree = self._libs
+        cv2 = self._cv2
         s = self.settings
         if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
             raise InputError("frames must be 8-bit BGR images")
@@ -261,21 +257,12 @@ class MarkerExtractor:
         b, g, r = (plane.ravel().take(idx) for plane in self._planes)
         sums = _blob_sums(lab, n, wgt, xs, ys, r, g, b, t)[1:]  # drop the background label
         cls = self.colors.classify(sums[:, 5:8])
-        group = np.arange(sums.shape[0])  # each component's marker
         # merge fragments of one marker: same class, centres closer than a diameter
-        if sums.shape[0] > 1 and s.marker_diameter_px > 0:
-            cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
-            pairs = cKDTree(np.c_[cx, cy]).query_pairs(s.marker_diameter_px, output_type="ndarray")
-            if pairs.size:
-                pairs = pairs[cls[pairs[:, 0]] == cls[pairs[:, 1]]]
-            if pairs.size:
-                m = sums.shape[0]
-                graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
-                k, group = connected_components(graph, directed=False)
-                merged = np.zeros((k, sums.shape[1]))
-                np.add.at(merged, group, sums)
-                sums = merged
-                cls = self.colors.classify(sums[:, 5:8])
+        sums, group = merge_fragments(sums, cls, s.marker_diameter_px)
+        if group is None:
+            group = np.arange(sums.shape[0])  # each component's marker
+        else:
+            cls = self.colors.classify(sums[:, 5:8])
         # step 7, the blob test; a failing blob of two touching markers of different colours is
         # split by the class of each pixel (the paper's per-pixel labelling) and its saturated parts kept
         cx, cy, elongation, rgb, saturation = _blob_shape(sums)
