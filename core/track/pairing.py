@@ -48,20 +48,26 @@ def track_2d(positions, colors, gate_px: float = 8.0, max_gap: int = 2):
         active = np.flatnonzero(f - seen <= max_gap + 1) if len(seen) else np.zeros(0, int)
         if active.size and len(xy):
             pred = last[active] + vel[active] * (f - seen[active])[:, None]
-            pairs = cKDTree(xy).query_ball_point(pred, gate_px)
-            rows = np.repeat(np.arange(active.size), [len(p) for p in pairs])
-            cols = np.concatenate([np.asarray(p, int) for p in pairs]) if rows.size else np.zeros(0, int)
+            near = cKDTree(pred).sparse_distance_matrix(cKDTree(xy), gate_px, output_type="ndarray")
+            rows, cols, dist = near["i"].astype(int), near["j"].astype(int), near["v"]
             same = col[active[rows]] == c[cols]
-            rows, cols = rows[same], cols[same]
+            rows, cols, dist = rows[same], cols[same], dist[same]
             if rows.size:
-                ur, rinv = np.unique(rows, return_inverse=True)
-                uc, cinv = np.unique(cols, return_inverse=True)
-                cost = np.full((ur.size, uc.size), 1e9)
-                cost[rinv, cinv] = np.linalg.norm(pred[rows] - xy[cols], axis=1)
-                r, k = linear_sum_assignment(cost)
-                ok = cost[r, k] < 1e9
-                t = active[ur[r[ok]]]
-                d = uc[k[ok]]
+                # a prediction with one detection in its gate that no other prediction reaches takes
+                # it (the assignment would); the rest are assigned one-to-one by distance
+                alone = (np.bincount(rows)[rows] == 1) & (np.bincount(cols)[cols] == 1)
+                r_pick, d_pick = rows[alone], cols[alone]
+                rows, cols, dist = rows[~alone], cols[~alone], dist[~alone]
+                if rows.size:
+                    ur, rinv = np.unique(rows, return_inverse=True)
+                    uc, cinv = np.unique(cols, return_inverse=True)
+                    cost = np.full((ur.size, uc.size), 1e9)
+                    cost[rinv, cinv] = dist
+                    r, k = linear_sum_assignment(cost)
+                    ok = cost[r, k] < 1e9
+                    r_pick, d_pick = np.r_[r_pick, ur[r[ok]]], np.r_[d_pick, uc[k[ok]]]
+                t = active[r_pick]
+                d = d_pick
                 dt = (f - seen[t])[:, None]
                 vel[t] = (xy[d] - last[t]) / dt
                 last[t] = xy[d]
