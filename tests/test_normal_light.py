@@ -143,3 +143,29 @@ def test_views_split_even_when_a_few_markers_sit_in_the_gap():
     assert 440 < b0 < 475 and 810 < b1 < 835
     with pytest.raises(InputError, match="no clear gap"):
         split_views_by_gaps(rng.uniform(0, 1280, 5000), 12.0)
+
+
+def test_bad_input_under_normal_light_is_one_message_and_nothing_written(tmp_path, capsys):
+    """A clip of bare skin (no dots), and a .fap whose mask is not 68 bits played with bake --fap:
+    exit 2, one line naming the problem, no output file."""
+    import cv2
+
+    frames = tmp_path / "skin"
+    frames.mkdir()
+    rng = np.random.default_rng(0)
+    for f in range(6):
+        img = np.clip(np.full((360, 640, 3), (150, 180, 220), float) + rng.normal(0, 3, (360, 640, 3)), 0, 255)
+        cv2.imwrite(str(frames / f"{f:03d}.png"), img.astype(np.uint8))
+    camera = tmp_path / "camera.json"
+    camera.write_text(json.dumps(Camera.ideal(700.0, (640, 360)).to_dict()))
+    for command in (["detect", frames, "--light", "normal", "-o", tmp_path / "d.csv"],
+                    ["track", frames, "--camera", camera, "--light", "normal", "-o", tmp_path / "t.c3d"]):
+        code, out, err = _run(command, capsys)
+        assert code == 2 and err.count("\n") == 1 and err.startswith("mirrorcap: error:")
+        assert "coloured dots" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["camera.json", "skin"]
+    bad = tmp_path / "bad.fap"
+    bad.write_text("2.1 x 30 1\n" + " ".join(["0"] * 60) + "\n0\n")
+    code, out, err = _run(["bake", "--fap", bad, "--head", ROOT / "sample_scenes" / "generic_head" / "head.blend",
+                           "-o", tmp_path / "out.blend"], capsys)
+    assert code == 2 and "68 bits" in err and not (tmp_path / "out.blend").exists()
