@@ -131,6 +131,7 @@ def track(args) -> int:
     from ..core.capture.rig import load_rig, rigid_markers
     from ..core.geometry.camera import Camera
     from ..core.track.pipeline import run_track
+    from ..core.track.seeds import read_seeds
     from ..core.track.tracker import TrackSettings
 
     camera = Camera.load(args.camera)
@@ -144,12 +145,13 @@ def track(args) -> int:
     if not args.conjecture_limit >= 0:
         raise MirrorCapError("--conjecture-limit must be a number of millimetres, 0 or more (or inf)")
     settings = TrackSettings.with_conjecture_limit(args.conjecture_limit)
+    seeds = read_seeds(args.seeds, camera.image_size) if args.seeds else None
     source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
                        colors=colors, extraction=ExtractionSettings(light=light), layout=rig.views, mirrors=mirrors,
                        known_length=known, start=start, end=end,
                        step=args.step, face_distance_mm=args.face_distance, settings=settings, rigid=rigid,
-                       rigid_source=rigid_source)
+                       rigid_source=rigid_source, seeds=seeds)
     if not args.quiet:
         pf = report["per_frame"]
         n = report["frames"]["count"]

@@ -172,6 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     trk.add_argument("--colors", help="COLORS.json colour classes (default: the light's four colours)")
     _light_option(trk)
     trk.add_argument("--rig", help="RIG.json view rectangles, and optionally the rigid markers (\"rigid\")")
+    trk.add_argument("--seeds", metavar="SEEDS.csv",
+                     help="markers designated by hand in the first tracked frame (id,view,x,y): each id's "
+                          "direct and mirror points are paired as given and the id becomes its label")
     trk.set_defaults(func=commands.track)
 
     mir = sub.add_parser("mirrors", help="mirror planes in mm from a ChArUco board seen in all three views",

@@ -169,3 +169,56 @@ def test_bad_input_under_normal_light_is_one_message_and_nothing_written(tmp_pat
     code, out, err = _run(["bake", "--fap", bad, "--head", ROOT / "sample_scenes" / "generic_head" / "head.blend",
                            "-o", tmp_path / "out.blend"], capsys)
     assert code == 2 and "68 bits" in err and not (tmp_path / "out.blend").exists()
+
+
+def _seeds_from_truth(clip, every=6, limit=20):
+    """SEEDS.csv rows a user would click on the first frame: the true dots the extractor finds
+    there (within 1 px), every ``every``-th of those seen in the direct view and a mirror."""
+    from scipy.spatial import cKDTree
+
+    truth, camera = np.load(clip / "truth.npz"), Camera.load(clip / "camera.json")
+    frame = next(iter(open_source(clip / "clip.mp4").frames(0, 1, 1)))[1]
+    det = marker_extractor(ColorClasses.default("normal"), ExtractionSettings(light="normal"))(frame)
+    tree = cKDTree(np.c_[det.x, det.y])
+    views = _projections(truth, camera, 0)
+    found = np.stack([tree.query(views[v])[0] < 1.0 for v in range(3)]) & truth["visible"][0]
+    picked = [m for m in range(found.shape[1]) if found[0, m] and found[1:, m].any()][::every][:limit]
+    rows = ["id,view,x,y"]
+    for m in picked:
+        for v, name in enumerate(("direct", "mirror0", "mirror1")):
+            if found[v, m]:
+                rows.append(f"dot{m:03d},{name},{views[v][m, 0]:.2f},{views[v][m, 1]:.2f}")
+    return "\n".join(rows) + "\n", picked
+
+
+def test_markers_designated_in_seeds_keep_their_names_and_their_dots(tmp_path, capsys):
+    """`track --seeds SEEDS.csv`: each designated marker is paired as given, carries its id as its
+    label, and follows its own dot through the take (3D identity test); bad seed files are refused
+    before anything is written."""
+    clip = CLIPS["light"]
+    text, picked = _seeds_from_truth(clip)
+    seeds = tmp_path / "seeds.csv"
+    seeds.write_text(text)
+    take = tmp_path / "take.c3d"
+    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--light", "normal",
+                           "--seeds", seeds, "-o", take, "-q"], capsys)
+    assert code == 0, err
+    data = read_c3d(take)
+    truth = np.load(clip / "truth.npz")
+    s = score_take(data["points"], truth["points"], Camera.load(clip / "camera.json"), conjectured=data["conjectured"])
+    named = {label: i for i, label in enumerate(data["labels"]) if label.startswith("dot")}
+    assert sorted(named) == sorted(f"dot{m:03d}" for m in picked) and len(picked) >= 12
+    assert all(s["ids"][i] == int(label[3:]) for label, i in named.items())
+    assert s["identity_switches"] == 0 and s["rms_mm"] < 0.5
+    bad = {"unknown view": "a,direct,600,400\na,mirror2,100,400\n",
+           "off the 1280x720 image": "a,direct,600,400\na,mirror0,1300,400\n",
+           "no point in the direct view": "a,mirror0,200,400\n",
+           "no point in either mirror": "a,direct,600,400\n",
+           "designated twice": "a,direct,600,400\na,direct,601,400\na,mirror0,200,400\n",
+           "no marker within 4 px": "a,direct,5,5\na,mirror0,200,400\n"}
+    for message, body in bad.items():
+        seeds.write_text("id,view,x,y\n" + body)
+        code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--light", "normal",
+                               "--seeds", seeds, "-o", tmp_path / "bad.c3d"], capsys)
+        assert code == 2 and message in err and err.count("\n") == 1, (message, err)
+        assert not (tmp_path / "bad.c3d").exists()

@@ -68,8 +68,9 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
               known_length=None, start: int = 0, end: int | None = None, step: int = 1,
               settings: TrackSettings | None = None, progress=None, track_progress=None,
               face_distance_mm: float = FACE_DISTANCE_MM, rigid=None, rigid_source: str = "rig file",
-              log: MessageLog | None = None) -> dict:
-    """Track ``source`` and write the take (C3D) and its report (JSON). ``progress(frames_read)``
+              log: MessageLog | None = None, seeds=None) -> dict:
+    """Track ``source`` and write the take (C3D) and its report (JSON). ``seeds``: the user's
+    designations in the first tracked frame (:func:`.seeds.read_seeds`). ``progress(frames_read)``
     is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
     ``rigid`` names the markers that carry the head pose, as :func:`..capture.rig.rigid_selection` gives
     them (``rigid_source`` says where they came from, for the report)."""
@@ -85,7 +86,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
-                            rigid_source=rigid_source, log=log)
+                            rigid_source=rigid_source, log=log, seeds=seeds)
 
 
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
@@ -103,7 +104,7 @@ def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
 def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
                      timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
-                     rigid_source: str = "rig file", log: MessageLog | None = None) -> dict:
+                     rigid_source: str = "rig file", log: MessageLog | None = None, seeds=None) -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
     ``rigid``: the markers that carry the head pose, as :func:`core.track.tracker.track` takes them.
@@ -135,7 +136,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         both = both_mirror_samples(det, camera, np.stack([p.normal for p in planes]))
         scale_link = None
     t1 = time.perf_counter()
-    result = track(det, camera, planes, settings, progress=progress, rigid=rigid)
+    result = track(det, camera, planes, settings, progress=progress, rigid=rigid, seeds=seeds)
     t_track = time.perf_counter() - t1
     points = result.points
     head = result.head_pose.copy()

@@ -96,6 +96,14 @@ def keep_measured(result: TrackResult, min_frames: int, min_fraction: float = 0.
         setattr(result, name, getattr(result, name)[:, keep])
     for name in ("neutral", "first_blob", "colour"):
         setattr(result, name, getattr(result, name)[keep])
-    result.labels = [f"m{i:03d}" for i in range(keep.size)]
+    # the tracker's own labels are numbered afresh; names the user gave (SEEDS.csv) stay
+    kept = [result.labels[i] for i in keep]
+    result.labels = [lab if not _automatic_label(lab) else f"m{j:03d}" for j, lab in enumerate(kept)]
     result.stats["markers_dropped_unmeasured"] = np.array([measured.shape[1] - keep.size])
     return result
+
+
+def _automatic_label(label: str) -> bool:
+    """``m000``...: a label the tracker made (not a designation's name)."""
+    return len(label) >= 4 and label[0] == "m" and label[1:].isdigit()
+

@@ -56,6 +56,7 @@ from .motion import (
 )
 from .pairing import paired_tracks, partner_blobs
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
+from .seeds import seeded_tracks
 
 
 def _undecided(det: ClipDetections, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
@@ -143,7 +144,7 @@ def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partn
     return partner
 
 
-def _initial_markers(det: ClipDetections, camera, normals, ds, settings):
+def _initial_markers(det: ClipDetections, camera, normals, ds, settings, seeds=None):
     """Step 2: markers are direct-view tracks paired with a mirror track over the first
     ``init_frames`` frames. Each marker's neutral position is its 3D position at the
     first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
@@ -159,6 +160,14 @@ def _initial_markers(det: ClipDetections, camera, normals, ds, settings):
         wide = paired_tracks(init, camera, normals, settings.wide_band_factor * settings.band_px, min(5, W),
                              max_rms_factor=np.inf)[2]
         partner = _confirm_by_both_mirrors(init, normals, ds, dids, n_dt, partner, wide, mids_all)
+    named = {}
+    if seeds is not None:                  # the user's designations win over the automatic pairing
+        seed_direct, seed_mirror = seeded_tracks(seeds, init, dids, mids_all)
+        for k in range(len(normals)):
+            for i in np.flatnonzero(seed_mirror[k] >= 0):
+                partner[k, partner[k] == seed_mirror[k, i]] = -1
+                partner[k, seed_direct[i]] = seed_mirror[k, i]
+        named = {int(t): name for t, name in zip(seed_direct, seeds.names)}
     undecided = _undecided(init, dids, n_dt, partner, ambiguous, min(5, W))
     undecided["blobs"] = [np.asarray(d, int) for d in dids]  # track id of each direct blob, per frame
     tracks = np.flatnonzero(np.any(partner >= 0, axis=0))
@@ -176,11 +185,16 @@ def _initial_markers(det: ClipDetections, camera, normals, ds, settings):
             neutral[new] = pos[f, new] @ R.T + T
             known |= new
     keep = np.flatnonzero(known)
-    return (blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)), undecided
+    missing = [name for t, name in named.items() if not known[np.searchsorted(tracks, t)]]
+    if missing:
+        raise DegenerateError(f"seed {missing[0]!r}: no 3D position in the first {W} frames (its direct and mirror "
+                              "points do not meet on one ray: are they the same dot?)")
+    names = [named.get(int(tracks[i])) for i in keep]
+    return (blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)), undecided, names
 
 
 def track(frames, camera: Camera, planes, settings: TrackSettings | None = None, progress=None,
-          rigid=None) -> TrackResult:
+          rigid=None, seeds=None) -> TrackResult:
     """Track the markers of ``frames`` (objects with ``direct``, ``direct_color``,
     ``mirror[k]``, ``mirror_color[k]`` in pixels, e.g. :class:`synthetic.simulate.FrameDetections`)
     given the ``camera`` and mirror ``planes`` (``MirrorPlane`` or ``(normal, d)``).
@@ -192,6 +206,9 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     markers (robustly), then the ``rigid_fraction`` of markers that moved least
     relative to the head -- forehead, nose bridge, temples on a real face -- carry the
     pose in a second pass.
+
+    ``seeds`` (:class:`.seeds.Seeds`, SEEDS.csv): markers the user designated in the first
+    frame; their pairs override the automatic pairing and their names become their labels.
 
     ``frames`` may be a :class:`..capture.views.ClipDetections` (as ``mirrorcap track``
     passes them, normalised once on ingest); per-frame detections are flattened and
@@ -212,7 +229,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         timings[name] = clock[-1] - clock[-2]
 
     det = ClipDetections.of(frames, camera)
-    markers, undecided = _initial_markers(det, camera, normals, ds, s)
+    markers, undecided, names = _initial_markers(det, camera, normals, ds, s, seeds)
     n_initial = len(markers[1])
     lap("initial_markers")
     z_mid = float(np.median(markers[1][:, 2]))
@@ -241,6 +258,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = _track_pass(det, cands, s, markers, given, progress)
     result.rigid = given
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
+    result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
     result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     lap("final_pass")
     _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
