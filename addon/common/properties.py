@@ -39,6 +39,9 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     mirrors: StringProperty(name="Mirrors", subtype="FILE_PATH",
                             description="MIRRORS.json in mm (optional; default: self-calibration from the markers)")
     colors: StringProperty(name="Colours", subtype="FILE_PATH", description="COLORS.json colour classes (optional)")
+    seeds: StringProperty(name="Seeds", subtype="FILE_PATH", default="",
+                          description="SEEDS.csv (id,view,x,y): markers designated in the first tracked frame; "
+                                      "their ids become their labels (optional)")
     light: EnumProperty(name="Light", items=LIGHTS, default="uv",
                         description="how the markers were lit: fluorescent under black light, or coloured dots")
     take: StringProperty(name="Take", subtype="FILE_PATH", default="//take.c3d", description="TAKE.c3d to write or read")

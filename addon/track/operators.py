@@ -86,6 +86,11 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
         rig, colors = rig_and_colours(s)
         layout = rig.views
         rigid, rigid_source = rigid_from_settings(s, rig, colors)
+        seeds = None
+        if s.seeds:
+            from ...core.track.seeds import read_seeds
+
+            seeds = read_seeds(input_path(s.seeds, what="seeds file"), camera.image_size)
         log = self.messages
         end = s.frame_end or None
         n = len(range(s.frame_start, min(end or source.frame_count, source.frame_count)))
@@ -98,7 +103,7 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
                                extraction=extraction_settings(s), layout=layout,
                                mirrors=mirrors, start=s.frame_start, end=end,
                                settings=TrackSettings.with_conjecture_limit(s.conjecture_limit_mm),
-                               rigid=rigid, rigid_source=rigid_source, log=log,
+                               rigid=rigid, rigid_source=rigid_source, log=log, seeds=seeds,
                                progress=lambda k: progress(0.8 * k / max(n, 1), "finding markers"),
                                track_progress=progress.stage(0.8, 1.0, "tracking"))
             return take, report

@@ -20,6 +20,7 @@ class MIRRORCAP_PT_track(SidebarPanel, bpy.types.Panel):
         row.prop(s, "frame_end")
         col.prop(s, "conjecture_limit_mm")
         col.prop(s, "light", expand=True)
+        col.prop(s, "seeds")
         box = col.box()
         box.label(text="Rigid markers (head pose): all 0 = RIG.json / automatic")
         box.prop(s, "rigid_region", text="")
