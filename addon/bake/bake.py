@@ -115,6 +115,14 @@ def _quaternions(R):
     return q * np.cumprod(np.where(flip == 0, 1.0, flip))[:, None]
 
 
+def fap_as_take(track, obj, head):
+    """A .fap track (:func:`core.retarget.mpeg4.read_fap`) as the take ``bake`` animates on the
+    head ``obj`` (its model ``head``): ``(take data, marker map, head pose)``
+    (:func:`core.retarget.mpeg4.replay_take`, at the head's own feature points)."""
+    labels, points, mapping, pose = replay_take(track, head, head_feature_points(obj, head))
+    return {"labels": labels, "points": points, "rate": track.fps}, mapping, pose
+
+
 def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n_modes: int = 8,
              neutral_frame: int = 0, head_pose_report=None, head_motion: bool = False,
              settings: RigSettings | None = None, report=None, progress=None, drop_unseen: bool = False,
@@ -147,8 +155,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
     head = read_head(obj)
     head.validate()
     if fap is not None:
-        labels, points, mapping, pose = replay_take(track, head, head_feature_points(obj, head))
-        data = {"labels": labels, "points": points, "rate": track.fps}
+        data, mapping, pose = fap_as_take(track, obj, head)
     timings["read_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     anim = animate_take(head, data["labels"], data["points"], data["rate"], neutral_frame=neutral_frame,

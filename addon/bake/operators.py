@@ -11,17 +11,10 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 from ...core.common.errors import InputError
-from ..common.inputs import head_object_from, input_path, required, scene_settings, selected_marker_labels
+from ..common.inputs import (head_object_from, input_path, required, scene_marker_map, scene_settings,
+                             selected_marker_labels)
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
 from ..common.properties import BAKE_MODES
-
-
-def _scene_marker_map(context):
-    """The scene's marker map (MAP.json), or None when none is set."""
-    from ...core.face.bind import load_marker_map
-
-    path = input_path(scene_settings(context).marker_map, what="marker map")
-    return load_marker_map(path) if path is not None else None
 
 
 MAP_ROLES = [("AUTO", "Auto", "the landmark if one is chosen, else the head's selected vertex"),
@@ -139,7 +132,7 @@ class MIRRORCAP_OT_bind(_UnseenMarkers, MirrorCapOperator):
         data = read_c3d(required(input_path(self.take, scene_settings(context).take, what="take"), "take (TAKE.c3d)"))
         head = read_head(obj)
         b = bind_take(head, data["labels"], data["points"], neutral_frame=self.neutral_frame,
-                      unseen=self.unseen(), marker_map=_scene_marker_map(context))
+                      unseen=self.unseen(), marker_map=scene_marker_map(context))
         group = obj.vertex_groups.get("mirrorcap_bound") or obj.vertex_groups.new(name="mirrorcap_bound")
         group.remove(list(range(len(obj.data.vertices))))
         group.add([int(v) for v in b.vertices], 1.0, "REPLACE")
@@ -170,22 +163,22 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
 
     def prepare(self, context):
         from ...core.take.c3d import read_c3d
-        from ..common.headio import head_feature_points, read_head
+        from ..common.headio import read_head
 
         obj = head_object_from(context, self.head_object)
         head = read_head(obj)
         head.validate()
         pose = None
         if self.fap:
-            from ...core.retarget.mpeg4 import read_fap, replay_take
+            from ...core.retarget.mpeg4 import read_fap
+            from .bake import fap_as_take
 
             track = read_fap(required(input_path(self.fap, what="FAP file"), "FAP file"))
-            labels, points, mapping, pose = replay_take(track, head, head_feature_points(obj, head))
-            data = {"labels": labels, "points": points, "rate": track.fps}
+            data, mapping, pose = fap_as_take(track, obj, head)
         else:
             data = read_c3d(required(input_path(self.take, scene_settings(context).take, what="take"),
                                      "take (TAKE.c3d)"))
-            mapping = _scene_marker_map(context)
+            mapping = scene_marker_map(context)
         if self.mode == "pca" and self.modes > data["points"].shape[0]:
             raise InputError(f"Modes must be at most the take's {data['points'].shape[0]} frames")
         self._obj_name = obj.name

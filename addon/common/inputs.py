@@ -77,3 +77,13 @@ def rigid_from_settings(s, rig, colours):
     from ...core.capture.rig import rigid_markers
 
     return rigid_markers(s.rigid_region, s.rigid_colors.split(","), rig, colours)
+
+
+def scene_marker_map(context):
+    """The scene's marker map (MAP.json, :func:`...core.face.bind.load_marker_map`), or None when
+    none is set."""
+    from ...core.face.bind import load_marker_map
+
+    path = input_path(scene_settings(context).marker_map, what="marker map")
+    return load_marker_map(path) if path is not None else None
+

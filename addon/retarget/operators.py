@@ -10,7 +10,7 @@ import bpy
 from bpy.props import FloatProperty, IntProperty, StringProperty
 
 from ...core.common.errors import InputError
-from ..common.inputs import head_object_from, input_path, required, scene_settings
+from ..common.inputs import head_object_from, input_path, required, scene_marker_map, scene_settings
 from ..common.jobs import MirrorCapJobOperator
 
 
@@ -28,7 +28,6 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
     smoothness: FloatProperty(name="Smoothness", default=8.0, min=0.0, description="temporal smoothness lambda, mm^2")
 
     def prepare(self, context):
-        from ...core.face.bind import load_marker_map
         from ...core.take.c3d import read_c3d
         from ..common.headio import read_head, read_shape_keys
 
@@ -48,7 +47,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         head = read_head(actor)
         head.validate()
         keys = read_shape_keys(actor)
-        mapping = load_marker_map(input_path(s.marker_map, what="marker map")) if s.marker_map else None
+        mapping = scene_marker_map(context)
         self._target, self._csv, self._rate = target.name, csv, data["rate"]
 
         def work(progress):
@@ -97,7 +96,6 @@ class MIRRORCAP_OT_export_faps(MirrorCapJobOperator):
     neutral_frame: IntProperty(name="Neutral Frame", default=0, min=0)
 
     def prepare(self, context):
-        from ...core.face.bind import load_marker_map
         from ...core.take.c3d import read_c3d
         from ..common.headio import head_feature_points, read_head
 
@@ -111,7 +109,7 @@ class MIRRORCAP_OT_export_faps(MirrorCapJobOperator):
         head = read_head(obj)
         head.validate()
         points = head_feature_points(obj, head)
-        mapping = load_marker_map(input_path(s.marker_map, what="marker map")) if s.marker_map else None
+        mapping = scene_marker_map(context)
         self._out = out
 
         def work(progress):

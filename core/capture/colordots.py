@@ -47,7 +47,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..common.errors import InputError
-from .detections import Detections, empty_detections, merge_fragments
+from .detections import Detections, blob_shape, empty_detections, merge_fragments
 
 BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times smaller
 LEARN_FROM_SKIN_DEG = 15.0  # learning classes: a dot's hue differs from the skin around it by this much
@@ -85,9 +85,9 @@ class ColorDotExtractor:
         return cv2.resize(med, (w, h), interpolation=cv2.INTER_LINEAR)
 
     def candidates(self, frame_bgr: np.ndarray):
-        """Step 2: ``(idx, contrast, value)`` of the candidate dot pixels -- flat pixel indices,
-        their chromaticity distance ``|c - c_bg|`` from the local background and their brightest
-        channel. Only pixels whose colour differs from the background by more than
+        """Step 2: ``(idx, contrast, value, bgr, background)`` of the candidate dot pixels -- flat
+        pixel indices, their chromaticity distance ``|c - c_bg|`` from the local background, their
+        brightest channel, and their colour and the background's (float32 BGR). Only pixels whose colour differs from the background by more than
         ``min_difference`` levels in some channel, averaged over 3x3 pixels, are looked at (a fast
         first cut; a dot differs from skin by far more)."""
         cv2 = self._cv2
@@ -142,16 +142,9 @@ class ColorDotExtractor:
         sums = sums[sums[:, 0] > 0]
         cls = self.colors.by_hue(sums[:, 5:8])[0]
         sums, _ = merge_fragments(sums, cls, 0.5 * s.marker_diameter_px)                 # step 5: fragments
-        W = sums[:, 0]
-        cx, cy = sums[:, 1] / W, sums[:, 2] / W
-        rgb = sums[:, 5:8] / W[:, None]
-        rgb = rgb / np.maximum(rgb.sum(axis=1, keepdims=True), 1e-12)
-        blob_contrast = np.linalg.norm(rgb - sums[:, 11:14] / W[:, None], axis=1)
-        sxx, syy = sums[:, 8] / W - cx * cx, sums[:, 9] / W - cy * cy
-        sxy = sums[:, 10] / W - cx * cy
-        half, root = 0.5 * (sxx + syy), np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
-        elongation = np.sqrt((half + root + 1.0 / 12.0) / (np.maximum(half - root, 0.0) + 1.0 / 12.0))
-        cls, hue_diff, saturation = self.colors.by_hue(rgb)
+        cx, cy, elongation, rgb, saturation = blob_shape(sums)          # columns 0-10 as the UV extractor's
+        blob_contrast = np.linalg.norm(rgb - sums[:, 11:14] / sums[:, :1], axis=1)
+        cls, hue_diff, _ = self.colors.by_hue(rgb)
         hue, _ = hue_saturation(rgb)
         bg_hue, _ = hue_saturation(sums[:, 11:14])
         from_skin = np.degrees(np.abs(np.angle(np.exp(1j * (hue - bg_hue)))))

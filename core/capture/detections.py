@@ -55,3 +55,18 @@ def merge_fragments(sums, cls, radius_px: float):
     np.add.at(merged, group, sums)
     return merged, group
 
+
+def blob_shape(sums):
+    """Centre, axis ratio (weighted covariance; + 1/12, a pixel's own extent, so a
+    one-pixel-wide streak has a finite ratio), normalised mean colour and its saturation
+    ``1 - 3 min(r, g, b)`` of blobs from their per-blob sums ``(n, >= 11)``: weight, weighted x
+    and y, pixel count, intensity, colour R, G, B (any weighting), weighted x^2, y^2, xy
+    (:func:`.markers._blob_sums`; :class:`.colordots.ColorDotExtractor` adds columns after these)."""
+    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
+    sxx = sums[:, 8] / sums[:, 0] - cx * cx
+    syy = sums[:, 9] / sums[:, 0] - cy * cy
+    sxy = sums[:, 10] / sums[:, 0] - cx * cy
+    half_trace, root = 0.5 * (sxx + syy), np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+    elongation = np.sqrt((half_trace + root + 1.0 / 12.0) / (np.maximum(half_trace - root, 0.0) + 1.0 / 12.0))
+    rgb = sums[:, 5:8] / np.maximum(sums[:, 5:8].sum(axis=1, keepdims=True), 1e-12)
+    return cx, cy, elongation, rgb, 1.0 - 3.0 * rgb.min(axis=1)

@@ -57,7 +57,7 @@ import numpy as np
 
 from ..common.errors import InputError
 from ..common.files import read_json
-from .detections import Detections, empty_detections, merge_fragments
+from .detections import Detections, blob_shape, empty_detections, merge_fragments
 
 LIGHTS = ("uv", "normal")  # fluorescent markers under black light; coloured dots under ordinary lamps
 
@@ -265,7 +265,7 @@ class MarkerExtractor:
             cls = self.colors.classify(sums[:, 5:8])
         # step 7, the blob test; a failing blob of two touching markers of different colours is
         # split by the class of each pixel (the paper's per-pixel labelling) and its saturated parts kept
-        cx, cy, elongation, rgb, saturation = _blob_shape(sums)
+        cx, cy, elongation, rgb, saturation = blob_shape(sums)
         odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
         keep = (sums[:, 3] >= s.min_area) & ~odd
         if odd.any() and s.split_pale_blobs:
@@ -274,7 +274,7 @@ class MarkerExtractor:
             key = group[lab[pix] - 1] * len(self.colors.names) + pc
             pieces, inv = np.unique(key, return_inverse=True)
             part = _blob_sums(inv, pieces.size, wgt[pix], xs[pix], ys[pix], r[pix], g[pix], b[pix], t)
-            pcx, pcy, pel, prgb, psat = _blob_shape(part)
+            pcx, pcy, pel, prgb, psat = blob_shape(part)
             ok = (part[:, 3] >= s.min_area) & ~((psat < s.pale_saturation) & (pel > s.max_elongation))
             sums, cls = np.r_[sums[keep], part[ok]], np.r_[cls[keep], pieces[ok] % len(self.colors.names)]
             cx, cy = np.r_[cx[keep], pcx[ok]], np.r_[cy[keep], pcy[ok]]
@@ -296,20 +296,6 @@ def _blob_sums(label, n, wgt, xs, ys, r, g, b, threshold) -> np.ndarray:
         np.bincount(label, wgt * xs * xs, n), np.bincount(label, wgt * ys * ys, n),  # second moments
         np.bincount(label, wgt * xs * ys, n),
     ], axis=1)
-
-
-def _blob_shape(sums):
-    """Centre, axis ratio (weighted covariance; + 1/12, a pixel's own extent, so a
-    one-pixel-wide streak has a finite ratio), normalised mean colour and its saturation
-    ``1 - 3 min(r, g, b)`` of blobs from their :func:`_blob_sums`."""
-    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
-    sxx = sums[:, 8] / sums[:, 0] - cx * cx
-    syy = sums[:, 9] / sums[:, 0] - cy * cy
-    sxy = sums[:, 10] / sums[:, 0] - cx * cy
-    half_trace, root = 0.5 * (sxx + syy), np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
-    elongation = np.sqrt((half_trace + root + 1.0 / 12.0) / (np.maximum(half_trace - root, 0.0) + 1.0 / 12.0))
-    rgb = sums[:, 5:8] / np.maximum(sums[:, 5:8].sum(axis=1, keepdims=True), 1e-12)
-    return cx, cy, elongation, rgb, 1.0 - 3.0 * rgb.min(axis=1)
 
 
 def marker_extractor(colors: ColorClasses, settings: ExtractionSettings | None = None):

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..common.errors import InputError
+from ..face.head import REGIONS
 
 FAP_COUNT = 68
 AU_RAD = 1e-5
@@ -184,22 +185,16 @@ def feature_points(head, jaw_open=None) -> dict:
     lm = head.landmarks()
     need = [n for n in ("chin", "upper_lip", "lower_lip", "mouth_corner_l", "mouth_corner_r", "nose_tip",
                         "eye_inner_l", "eye_outer_l", "eye_inner_r", "eye_outer_r") if n not in lm]
-    derived = {}
-    if need:
-        if _missing_points(groups):
-            raise InputError(f"the head {head.name!r} has no fp_<id> groups for "
-                             f"{', '.join(_missing_points(groups))} and lacks the landmarks to place them: "
-                             + ", ".join(f"lm_{n}" for n in need))
-    else:
-        derived = _derive_points(head, lm, jaw_open)
-    return {**derived, **groups}
+    if not need:
+        return {**_derive_points(head, lm, jaw_open), **groups}
+    missing = [p for p in _ALL_POINTS if p not in groups]
+    if missing:
+        raise InputError(f"the head {head.name!r} has no fp_<id> groups for {', '.join(missing)} and lacks the "
+                         "landmarks to place them: " + ", ".join(f"lm_{n}" for n in need))
+    return groups
 
 
 _ALL_POINTS = sorted({f.point for f in LOW_LEVEL_FAPS} | {"3.1", "3.3", "3.5", "3.6", "9.15"})
-
-
-def _missing_points(groups) -> list:
-    return [p for p in _ALL_POINTS if p not in groups]
 
 
 def _derive_points(head, lm, jaw_open=None) -> dict:
@@ -210,7 +205,6 @@ def _derive_points(head, lm, jaw_open=None) -> dict:
     normals = head.vertex_normals() @ C.T
     front = np.flatnonzero(skin & (normals[:, 2] > 0.3))
     labels = head.region_labels()
-    from ..face.head import REGIONS
 
     def nearest(xy, among=front):
         d = np.hypot(P[among, 0] - xy[0], P[among, 1] - xy[1])
@@ -269,8 +263,7 @@ def _derive_points(head, lm, jaw_open=None) -> dict:
             band = ring[sign * (P[ring, 1] - c[1]) > 0]
             pts[lid] = int(band[np.argmin(np.abs(P[band, 0] - c[0]))]) if band.size else nearest((c[0], c[1] + 6 * sign))
         pupils[side] = P[pts[pid]]
-    ens = 0.5 * (pupils["l"][1] + pupils["r"][1])
-    ens = P[pts["9.15"], 1] - ens
+    ens = P[pts["9.15"], 1] - 0.5 * (pupils["l"][1] + pupils["r"][1])     # eye-nose separation
     for side, inner_id, mid_id, outer_id in (("l", "4.1", "4.3", "4.5"), ("r", "4.2", "4.4", "4.6")):
         y = pupils[side][1] - 0.4 * ens
         pts[inner_id] = nearest((P[lm[f"eye_inner_{side}"], 0], y))
@@ -417,11 +410,6 @@ def feature_point_displacements(track: FapTrack, head, points: dict | None = Non
     return names, np.array([points[p] for p in names]), D
 
 
-def head_rotation(track: FapTrack):
-    """``(F, 3)`` pitch, yaw, roll in radians from FAPs 48-50 (0 where masked)."""
-    return np.stack([track.values[:, n - 1] * AU_RAD * track.mask[n - 1] for n, _ in HEAD_ROTATION], axis=1)
-
-
 # ----------------------------------------------------------------------------- the .fap text form
 def fap_text(track: FapTrack) -> str:
     """The track in the MPEG-4 FAP text form (module text). Values are rounded to integers."""
@@ -507,7 +495,7 @@ def replay_take(track: FapTrack, head, points: dict | None = None):
     (the inner and outer lip corners of a head with a thin lip) are one marker, at the mean of
     their displacements."""
     names, vertices, D = feature_point_displacements(track, head, points)
-    unique, first, group = np.unique(vertices, return_index=True, return_inverse=True)
+    unique, group = np.unique(vertices, return_inverse=True)
     counts = np.bincount(group)
     merged = np.zeros((D.shape[0], unique.size, 3))
     np.add.at(merged, (slice(None), group), D)

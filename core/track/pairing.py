@@ -185,21 +185,27 @@ def _presence(ids_per_frame):
 
 
 def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float = 1.0, min_frames: int = 5,
-                  max_rms_factor: float = 2.0):
+                  max_rms_factor: float = 2.0, tracks=None):
     """2D tracks of the direct view and of each mirror over the frames of ``det``, and each
     direct track's partner track per mirror (:func:`pair_tracks`; the band depends only on
     the mirrors' ``normals`` ``(K, 3)``, eq. 5.2). Returns ``(direct ids per frame, number of
     direct tracks, partner (K, n): -1 none, mirror ids per frame per mirror, ambiguous (K, n):
     tracks with rival partners in that mirror, rms_px (K, n): each pair's band residual)``.
-    ``max_rms_factor``: :func:`pair_tracks`'s RMS test (``inf``: none)."""
-    dids, n_dt = track_2d(det.per_frame(0), det.per_frame(0, "colour"))
+    ``max_rms_factor``: :func:`pair_tracks`'s RMS test (``inf``: none). ``tracks``: the
+    ``(direct ids, number of direct tracks, mirror ids)`` of an earlier call on the same ``det``,
+    to pair them again (another band) without linking them again."""
+    if tracks is None:
+        dids, n_dt = track_2d(det.per_frame(0), det.per_frame(0, "colour"))
+        given = None
+    else:
+        dids, n_dt, given = tracks
     K = len(normals)
     partner = np.full((K, n_dt), -1)
     ambiguous = np.zeros((K, n_dt), bool)
     rms_px = np.full((K, n_dt), np.nan)
     mids_all = []
     for k in range(K):
-        mids, _ = track_2d(det.per_frame(k + 1), det.per_frame(k + 1, "colour"))
+        mids = track_2d(det.per_frame(k + 1), det.per_frame(k + 1, "colour"))[0] if given is None else given[k]
         pairs = pair_tracks(det, dids, k, mids, camera, MirrorPlane(normal=np.asarray(normals[k], float), d=-1.0),
                             band_px=band_px, min_frames=min_frames, max_rms_factor=max_rms_factor)
         partner[k, pairs.direct_track] = pairs.mirror_track

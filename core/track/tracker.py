@@ -119,8 +119,7 @@ def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partn
     median of the markers both mirrors pair cleanly (at least ``floor_mm``), and neither mirror
     track is another marker's partner. Chance alignments in two mirrors at once do not agree in
     3D."""
-    taken = [set(partner[k][partner[k] >= 0].tolist()) for k in range(2)]
-    free = np.array([[m >= 0 and m not in taken[k] for m in wide[k]] for k in range(2)])
+    free = np.stack([(wide[k] >= 0) & ~np.isin(wide[k], partner[k][partner[k] >= 0]) for k in range(2)])
     noisy = np.where(free, wide, -1)
     cand = np.flatnonzero(np.all(partner < 0, axis=0) & np.all(noisy >= 0, axis=0))
     both = np.flatnonzero(np.all(partner >= 0, axis=0))
@@ -158,7 +157,7 @@ def _initial_markers(det: ClipDetections, camera, normals, ds, settings, seeds=N
                                                                min(5, W))
     if settings.wide_band_factor > 1.0 and len(normals) == 2:
         wide = paired_tracks(init, camera, normals, settings.wide_band_factor * settings.band_px, min(5, W),
-                             max_rms_factor=np.inf)[2]
+                             max_rms_factor=np.inf, tracks=(dids, n_dt, mids_all))[2]
         partner = _confirm_by_both_mirrors(init, normals, ds, dids, n_dt, partner, wide, mids_all)
     named = {}
     if seeds is not None:                  # the user's designations win over the automatic pairing
