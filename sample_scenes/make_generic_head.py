@@ -146,13 +146,19 @@ def build(assets) -> tuple[HeadModel, dict, dict]:
     # mouth corners: where the smile target pulls hardest
     for side, unit in (("l", "mouthSmileLeft"), ("r", "mouthSmileRight")):
         lm[f"mouth_corner_{side}"] = skin[np.argmax(np.linalg.norm(units[unit][skin], axis=1))]
-    y_slit = V[[lm["mouth_corner_l"], lm["mouth_corner_r"]], 1].mean()
+    y_corners = V[[lm["mouth_corner_l"], lm["mouth_corner_r"]], 1].mean()
+    # the mouth slit is curved (the corners sit higher than its middle): a lip vertex is below it when
+    # the jaw's own opening target carries it with the chin (more than 40 % of the chin's travel)
     front = mid[V[mid, 2] < V[nose_tip, 2] + 25]          # midline points facing the camera
-    above = front[(V[front, 1] < y_slit) & (V[front, 1] > y_slit - 12)]
-    below = front[(V[front, 1] > y_slit) & (V[front, 1] < y_slit + 14)]
+    chin_travel = np.linalg.norm(units["jawOpen"][front], axis=1).max()
+    rides_jaw = np.linalg.norm(units["jawOpen"], axis=1) > 0.4 * chin_travel
+    lips = front[np.abs(V[front, 1] - y_corners) < 14]
+    above = lips[~rides_jaw[lips] & (V[lips, 1] < y_corners + 8)]
+    below = lips[rides_jaw[lips]]
     lm["upper_lip"] = above[np.argmin(V[above, 2])]
     lm["lower_lip"] = below[np.argmin(V[below, 2])]
-    chin_band = front[(V[front, 1] > V[lm["lower_lip"], 1] + 16) & (V[front, 1] < V[lm["lower_lip"], 1] + 40)]
+    y_slit = y_corners
+    chin_band = front[(V[front, 1] > y_corners + 17.5) & (V[front, 1] < y_corners + 41.5)]
     lm["chin"] = chin_band[np.argmin(V[chin_band, 2])]
     # tragi: the most anterior vertex of the ear (skin beyond 82 % of the head's half-width) a little below
     # the eyes' height
@@ -187,22 +193,25 @@ def build(assets) -> tuple[HeadModel, dict, dict]:
 
     # the lips: an ellipse around the mouth, split at the slit (the mouth's inside follows the same split)
     ru = np.hypot(x / (corner_x + 2.0), (y - y_slit) / 9.0)
-    rl = np.hypot(x / (corner_x + 2.0), (y - y_slit) / 8.0)
+    rl = np.hypot(x / (corner_x + 2.0), (y - y_slit) / 12.0)     # the lower lip reaches below the curved slit
     mouth_inside = np.zeros(n, bool)
     mouth_inside[skin] = (z[skin] > V[lm["lower_lip"], 2] + 4.0) & (z[skin] < V[lm["lower_lip"], 2] + 50.0) & \
         (ax_[skin] < corner_x + 2) & \
         (np.abs(y[skin] - y_slit) < 16)
-    label[mouth_inside & (y < y_slit)] = REGIONS.index("upper_lip")
-    label[mouth_inside & (y >= y_slit)] = REGIONS.index("lower_lip")
-    put("upper_lip", (ru < 1.0) & (y < y_slit))
-    put("lower_lip", (rl < 1.0) & (y >= y_slit))
+    # above or below the slit: by the jaw target near the mouth (the curved slit), by height further out
+    near_mouth = np.hypot(x / (corner_x + 2.0), (y - y_slit) / 16.0) < 1.0
+    below_slit = np.where(near_mouth, rides_jaw | (y > y_slit + 4.0), y >= y_slit)
+    label[mouth_inside & ~below_slit] = REGIONS.index("upper_lip")
+    label[mouth_inside & below_slit] = REGIONS.index("lower_lip")
+    put("upper_lip", (ru < 1.0) & ~below_slit)
+    put("lower_lip", (rl < 1.0) & below_slit)
     put("forehead", (y < brow_y) & (y > brow_y - 55.0))
     for side, sgn in (("l", 1), ("r", -1)):
         ex = eye_c[side][0][0]
         put(f"eye_{side}", (np.abs(x - ex) < 24.0) & (sgn * x > 10.0) & (y < eye_bottom))
     nose_w = 11.0 + 10.0 * np.clip((y - brow_y) / max(nose_base - brow_y, 1.0), 0, 1)
     put("nose", (ax_ < nose_w) & (y < nose_base + 2.0))
-    put("upper_mouth", (ax_ < corner_x + 12.0) & (y < y_slit))
+    put("upper_mouth", (ax_ < corner_x + 12.0) & ~below_slit)
     put("lower_mouth", (ax_ < corner_x + 12.0) & (y < chin_y - 4.0))
     jaw_line = y_slit + 6.0 + (ax_ - corner_x - 12.0) * 0.9      # rises toward the ear
     put("jaw", (y >= chin_y - 4.0) | ((y > jaw_line) & (ax_ >= corner_x + 12.0)))
@@ -228,7 +237,7 @@ def build(assets) -> tuple[HeadModel, dict, dict]:
         groups[f"eyelid_upper_{side}"] = np.where(w > 0.02, w, 0.0)
     groups["teeth_upper"] = onehot(part_of["helper-upper-teeth"])
     groups["teeth_lower"] = onehot(part_of["helper-lower-teeth"])
-    groups["inner_lip_lower"] = onehot(np.flatnonzero(mouth_inside & (y >= y_slit) & (y < y_slit + 12)
+    groups["inner_lip_lower"] = onehot(np.flatnonzero(mouth_inside & below_slit & (y < y_slit + 12)
                                                       & (ax_ < corner_x - 4.0)))
 
     sizes = np.full(len(polys), polys.shape[1])

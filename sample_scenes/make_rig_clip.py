@@ -218,8 +218,27 @@ def make_scan(head: HeadModel, subject: np.ndarray, rng) -> tuple[np.ndarray, np
     R = (np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]) @ np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
          @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]]))
     t = np.array([12.0, -40.0, 310.0])
-    lms = {n: (R @ subject[i] + t).round(3).tolist() for n, i in head.landmarks().items() if not n.startswith("tragus")}
-    return V @ R.T + t, T, lms, R, t
+    return V @ R.T + t, T, scan_landmarks(head, subject, R, t), R, t
+
+
+def scan_landmarks(head: HeadModel, subject: np.ndarray, R, t) -> dict:
+    """The scan's landmarks ``{name: [x, y, z]}`` as a user clicks them (where the head defines them; the
+    tragi are off the scan), in the scanner's frame ``R p + t``."""
+    return {n: (R @ subject[i] + t).round(3).tolist() for n, i in head.landmarks().items() if not n.startswith("tragus")}
+
+
+def rewrite_scan_landmarks(out: Path) -> int:
+    """``--scan-landmarks-only``: an existing clip's scan_landmarks.json from its truth (the subject and
+    the scanner's frame) at this version's landmark vertices of the generic head."""
+    path, truth = out / "scan_landmarks.json", out / "truth.npz"
+    if not path.is_file() or not truth.is_file():
+        raise SystemExit(f"{out}: no scan_landmarks.json and truth.npz to rewrite")
+    z = np.load(truth)
+    head = load_head_npz(ROOT / "sample_scenes" / "generic_head" / "head.npz")
+    lms = scan_landmarks(head, z["subject_vertices"].astype(float), z["scan_rotation"], z["scan_translation"])
+    write_files_atomically({path: json.dumps(lms, indent=2) + "\n"})
+    print(f"{path}: {len(lms)} landmarks rewritten")
+    return 0
 
 
 def ply_bytes(V, T) -> bytes:
@@ -421,7 +440,12 @@ def main(argv=None) -> int:
     ap.add_argument("--truth-only", action="store_true",
                     help="render nothing: recompute the truth of an existing clip made with the same options "
                          "(checked against its truth.npz) and add what this version records (visibility)")
+    ap.add_argument("--scan-landmarks-only", action="store_true",
+                    help="render nothing: rewrite an existing clip's scan_landmarks.json at the generic head's "
+                         "current landmark vertices (from the clip's truth.npz)")
     args = ap.parse_args(argv)
+    if args.scan_landmarks_only:
+        return rewrite_scan_landmarks(args.out.resolve())
     spec = ClipSpec(image_size=tuple(args.size), focal_px=args.focal, head_distance_mm=args.distance,
                     mirror_longitude_deg=args.mirror_deg, marker_radius_mm=args.marker_mm / 2,
                     n_markers=args.markers, head_deg=tuple(args.head_deg), tempo=args.tempo,

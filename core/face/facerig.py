@@ -41,6 +41,10 @@ from .head import REGIONS, HeadModel
 from .rbf import PAPER_K, RBFScattering
 
 REST = "rest"
+#: regions below the mouth slit that ride the jaw: they take its rigid motion when it opens, and their
+#: RBF carries only the markers' departures from it (section 7.4's rule for the jaw, extended to the
+#: lower lip and lower mouth, which sit on the mandible)
+JAW_RIDING = ("jaw", "lower_mouth", "lower_lip")
 
 
 @dataclass
@@ -56,6 +60,7 @@ class RigSettings:
     # region pairs that never blend (the mouth slit), except within `corner_blend_mm` of the mouth corners
     hard_borders: tuple = (("upper_lip", "lower_lip"),)
     corner_blend_mm: float = 6.0
+    min_region_markers: int = 4   # a region with fewer markers of its own also takes its neighbours'
 
 
 def blink_closure(n_frames: int, fps: float, interval_s: float = 2.5, duration_s: float = 0.25,
@@ -118,6 +123,7 @@ class FaceRig:
         W = self._blend_weights(labels, len(names))                  # (V, R+1)
         self.region_weights = W
         jaw = REGIONS.index("jaw")
+        riding = [names.index(r) for r in JAW_RIDING]
         # hypothetical points: jaw-region vertices nearest the hinge (the jaw "near the ear")
         jaw_members = np.flatnonzero(labels == jaw)
         d_h = np.minimum(np.linalg.norm(V[jaw_members] - hinge[0], axis=1),
@@ -130,24 +136,34 @@ class FaceRig:
         n_m, n_f = mv.size, self.fixed.size
         G_main = np.zeros((nv, self.controls.size))
         G_jaw = np.zeros((nv, self.controls.size))
+        adjacent = self._adjacent_regions(labels, len(names))
+        self.region_markers = {}
         for r, name in enumerate(names):
             rows = np.flatnonzero(W[:, r] > 0)
             if rows.size == 0:
                 continue
-            if r == jaw:
-                # the jaw's own controls: its markers and the hypothetical points, which ride the rigid
+            own = W[mv, r] > 0
+            if own.sum() < self.s.min_region_markers and r != len(REGIONS):
+                # too few markers of its own (a small region, a sparse layout): the region borrows the
+                # markers of its neighbours on the same side of the jaw rather than falling back to the
+                # fixed points' rest (a region riding the jaw carries residuals from its rigid motion)
+                same = [n for n in adjacent[r] if (n in riding) == (r in riding)]
+                own |= np.any(W[mv][:, same] > 0, axis=1)
+            self.region_markers[name] = np.flatnonzero(own)
+            if r in riding:
+                # regions riding the jaw: their markers and the hypothetical points, which ride the rigid
                 # jaw; no fixed points (they would pull the rigid motion, an affine field, back to rest)
-                cols = np.r_[np.flatnonzero(W[mv, r] > 0), n_m + n_f + np.arange(hyp.size)]
+                cols = np.r_[np.flatnonzero(own), n_m + n_f + np.arange(hyp.size)]
             else:
-                cols = np.r_[np.flatnonzero(W[mv, r] > 0), n_m + np.arange(n_f)]
+                cols = np.r_[np.flatnonzero(own), n_m + np.arange(n_f)]
             try:
                 rbf = RBFScattering(V[self.controls[cols]], k=self.s.k)
             except DegenerateError:
-                if r != jaw:
+                if r not in riding:
                     raise
-                continue  # too few jaw controls: the jaw region moves rigidly only
+                continue  # too few controls: the region moves with the rigid jaw only
             E = rbf.influence_matrix(V[rows])                          # (rows, cols)
-            target = G_jaw if r == jaw else G_main
+            target = G_jaw if r in riding else G_main
             target[np.ix_(rows, cols)] += W[rows, r][:, None] * E
         self.G_main, self.G_jaw = G_main, G_jaw
         # the blocks deform() multiplies: the jaw region's few rows and controls, and the
@@ -157,7 +173,7 @@ class FaceRig:
         self._jaw_rows = np.flatnonzero(np.any(G_jaw != 0, axis=1))
         self._jaw_cols = np.flatnonzero(np.any(G_jaw != 0, axis=0))
         self._G_jaw_block = np.ascontiguousarray(G_jaw[np.ix_(self._jaw_rows, self._jaw_cols)].T)  # (cols, rows)
-        self.jaw_weight = W[:, jaw]
+        self.jaw_weight = W[:, riding].sum(1)
         # chin displacement from all markers (one global RBF row; exact if a marker sits on the chin)
         chin_rbf = RBFScattering(V[np.r_[mv, self.fixed]], k=self.s.k)
         self.chin_row = chin_rbf.influence_matrix(V[[self.chin]])[0]  # (n_m + n_f,)
@@ -194,6 +210,19 @@ class FaceRig:
             W = A @ W
         W[W < 1e-6] = 0.0
         return W / W.sum(1, keepdims=True)
+
+    def _adjacent_regions(self, labels, n_regions) -> list:
+        """Per region, the regions sharing a mesh edge with it (not across a hard border, not the rest)."""
+        e = self.head.edges()
+        la, lb = labels[e[:, 0]], labels[e[:, 1]]
+        A = np.zeros((n_regions, n_regions), bool)
+        A[la, lb] = A[lb, la] = True
+        names = list(REGIONS) + [REST]
+        for a, b in self.s.hard_borders:
+            A[names.index(a), names.index(b)] = A[names.index(b), names.index(a)] = False
+        A[:, -1] = False
+        np.fill_diagonal(A, False)
+        return [np.flatnonzero(A[r]) for r in range(n_regions)]
 
     def _setup_inner_lip(self):
         head, V = self.head, self.head.vertices
