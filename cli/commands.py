@@ -267,7 +267,14 @@ def retarget(args) -> int:
                        method=args.method, csv=args.csv, head_pose_report=args.head_pose, report=args.report,
                        marker_map=args.marker_map, neutral_frame=args.neutral_frame, smoothness=args.smoothness,
                        head_object=args.head_object, drop_unseen=args.drop_unseen,
-                       conjecture_unseen=args.conjecture_unseen)
+                       conjecture_unseen=args.conjecture_unseen, mode=args.mode, n_modes=args.modes)
+    if args.method == "transfer":
+        if not args.quiet:
+            sc = res["region_scales"]
+            print(f"transferred {res['frames']} frames onto {res['target_object']} ({res['mode']} keys): scales "
+                  f"upper {'/'.join(f'{v:.2f}' for v in sc['upper'])}, lower "
+                  f"{'/'.join(f'{v:.2f}' for v in sc['lower'])} (lateral/down/forward) -> {res['output']}")
+        return 0
     if not args.quiet:
         print(f"retargeted {res['frames']} frames onto {res['target_object']}: {len(res['shapes_keyed'])} ARKit shapes "
               f"keyed, fit residual {res['residual_mm']['rms']:.3f} mm RMS -> {res['output']}")

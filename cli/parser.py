@@ -16,7 +16,7 @@ Commands (each documented in the README):
     colour classes learned from sample frames.
 ``mirrorcap bake TAKE.c3d --head HEAD.blend -o OUT.blend [--mode frames|pca] [--modes K] ...``
     bind the take to the head, run the face rig on every frame, write the head with shape keys.
-``mirrorcap retarget TAKE.c3d --head HEAD.blend --target TARGET.blend -o OUT.blend [--csv LIVELINK.csv]``
+``mirrorcap retarget TAKE.c3d --head HEAD.blend --target TARGET.blend -o OUT.blend [--method arkit|transfer] [--csv LIVELINK.csv]``
     ARKit-52 weights of the take keyed on another character's shape keys.
 ``mirrorcap fap TAKE.c3d --head HEAD.blend -o TAKE.fap`` / ``mirrorcap bake --fap TAKE.fap --head HEAD.blend -o OUT.blend``
     MPEG-4 FAPs of a take / a .fap file played on a head.
@@ -274,19 +274,28 @@ def _blender_commands(sub) -> None:
     _bake_options(batch)
     batch.set_defaults(func=commands.batch)
 
-    ret = sub.add_parser("retarget", help="a take onto another character through the ARKit-52 shapes (needs bpy)",
-                         description="Bind TAKE.c3d to the actor's head (its ARKit shape keys), solve per-frame "
-                                     "ARKit weights in [0, 1] (bounded least squares with temporal smoothness), key "
-                                     "the target's shape keys of the same names, write OUT.blend (and a Live Link "
-                                     "Face CSV).")
+    ret = sub.add_parser("retarget", help="a take onto another character: ARKit-52 weights or motion transfer "
+                                          "(needs bpy)",
+                         description="arkit: bind TAKE.c3d to the actor's head (its ARKit shape keys), solve "
+                                     "per-frame ARKit weights in [0, 1] (bounded least squares with temporal "
+                                     "smoothness), key the target's shape keys of the same names, write OUT.blend "
+                                     "(and a Live Link Face CSV). transfer: carry the actor's motion onto a target "
+                                     "with lm_<name> landmarks and no shape keys (landmark RBF and projection, "
+                                     "feature-distance scaling), keyed as bake keys a head.")
     ret.add_argument("take", help="TAKE.c3d, or a Live Link Face CSV (an iPhone take: its weights are keyed as they are)")
     ret.add_argument("--head", help="HEAD.blend: the actor's head with the 52 ARKit shape keys (for a C3D take)")
     ret.add_argument("--rate", type=float, default=60.0, help="frames/s of a CSV take (default 60)")
     ret.add_argument("--head-object", help="the actor's head object (default: the only head in HEAD.blend)")
     ret.add_argument("--target", required=True, help="TARGET.blend: the character")
-    ret.add_argument("--target-object", help="the character's mesh (default: the only mesh with ARKit shape keys)")
+    ret.add_argument("--target-object", help="the character's mesh (default: the only mesh with ARKit shape keys; "
+                                             "with --method transfer the only mesh with lm_* landmark groups)")
     ret.add_argument("-o", "--output", required=True, help="OUT.blend to write (the target file, animated)")
-    ret.add_argument("--method", choices=("arkit",), default="arkit", help="arkit: ARKit-52 weights (default)")
+    ret.add_argument("--method", choices=("arkit", "transfer"), default="arkit",
+                     help="arkit: ARKit-52 weights on the target's shape keys (default); transfer: the motion "
+                          "itself onto a target with landmarks")
+    ret.add_argument("--mode", choices=("frames", "pca"), default="frames",
+                     help="transfer: one shape key per frame (default) or PCA keys, as bake writes them")
+    ret.add_argument("--modes", type=int, default=8, help="transfer --mode pca: number of keys (default 8)")
     ret.add_argument("--csv", help="LIVELINK.csv to write (Live Link Face format)")
     _binding_options(ret)
     ret.add_argument("--smoothness", type=float, help="temporal smoothness lambda in mm^2 (default 8)")

@@ -93,7 +93,7 @@ def _render_preview(obj, frames: int, fps: float, path: Path) -> None:
 
 
 def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool = True) -> int:
-    from ..addon.bake.bake import bake_displacements
+    from ..addon.common.shape_keys import bake_displacements
     from ..addon.common.headio import GENERIC_HEAD, new_head_object, save_blend_atomically
     from ..addon.common.take_io import import_take
     from ..core.capture.rig import load_rig_views

@@ -138,14 +138,24 @@ ARKIT_CHANNELS = ["eyeBlinkLeft", "eyeSquintLeft", "eyeBlinkRight", "eyeSquintRi
 
 
 def arkit_take(head: HeadModel, shape_keys: dict, channels=ARKIT_CHANNELS, frames: int = 300, noise: float = 0.1,
-               seed: int = 2, still: bool = False, fps: float = 30.0):
+               seed: int = 2, still: bool = False, fps: float = 30.0, full_blinks: bool = False):
     """A ~150-marker take ``labels, points (F, M, 3)`` of a performance with known ARKit weights
     ``(F, C)`` (one channel per shape, the exclusive pairs and ``mouthClose <= jawOpen``
-    respected; ``still``: the neutral held), the head moving 10 deg, ``noise`` mm per coordinate."""
+    respected; ``still``: the neutral held), the head moving 10 deg, ``noise`` mm per coordinate.
+    ``full_blinks``: the eyeBlink channels become blinks that shut fully (held 3 frames, about
+    every 1.5 s, eyes together), as a real performer blinks."""
     rng = np.random.default_rng(seed)
     verts, labels = place_markers(head, 150, 1)
     _, W = performance(head, shape_keys, frames, fps, seed, channels={n: {n: 1.0} for n in channels})
     W = np.zeros_like(W) if still else apply_exclusions(W, channels)
+    if full_blinks and not still:
+        t = np.arange(frames)
+        period = int(round(1.5 * fps))
+        phase = (t + period // 2) % period
+        blink = np.interp(phase, [0, 3, 6, 9, 12], [0.0, 1.0, 1.0, 1.0, 0.0])   # close, hold, open
+        for n in ("eyeBlinkLeft", "eyeBlinkRight"):
+            if n in channels:
+                W[:, list(channels).index(n)] = blink
     D = np.einsum("fk,kvd->fvd", W, np.stack([shape_keys[n] for n in channels]))
     R, t = head_motion(frames, fps, 10.0, seed + 1)
     q = head.vertices[verts][None] + D[:, verts]

@@ -213,3 +213,13 @@ def test_take_operators_stabilize_and_marker_map(tmp_path):
     assert out["export_faps"] == ["FINISHED"] and out["fap_lines"] == 1 + 2 * 20
     assert out["play_fap"] == ["FINISHED"] and out["play_fap_keys"] == 1 + 52 + 20
     assert out["play_bad"][0] == "ERROR" and "68 bits" in out["play_bad"][1] and out["play_bad_unchanged"]
+    # motion transfer onto a mesh with no keys or groups: landmarks clicked and guessed, then Retarget
+    assert out["transfer_no_landmarks"][0] == "ERROR" and "lm_nose_tip" in out["transfer_no_landmarks"][1]
+    assert out["clicked_nose_mm"] < 3.0                    # the ray's hit lands on (or next to) the nose tip
+    assert all(r == ["FINISHED"] for r in out["place"])
+    assert out["transfer_missing"][0] == "ERROR" and "lm_eye_outer_r" in out["transfer_missing"][1]
+    assert out["guess"] == ["FINISHED"] and len(out["guessed_off"]) == 12
+    assert max(out["guessed_off"].values()) < 3.0, out["guessed_off"]
+    assert out["transfer_cancel"] == ["CANCELLED"] and out["transfer_cancel_unchanged"]
+    assert out["transfer"] == ["FINISHED"] and out["transfer_keys"] == 1 + 20
+    assert out["transfer_moved_mm"] > 0.5

@@ -88,7 +88,7 @@ def test_bake_pca_reproduces_a_faceunit_performance_with_eight_modes(tmp_path, h
     code = (
         "import sys, json, numpy as np, bpy\n"
         "from mirrorcap.addon.common.headio import open_blend, find_head_object, read_head, save_blend_atomically\n"
-        "from mirrorcap.addon.bake.bake import bake_displacements\n"
+        "from mirrorcap.addon.common.shape_keys import bake_displacements\n"
         f"open_blend({str(HEAD_BLEND)!r})\n"
         "obj = find_head_object(None)\n"
         "head = read_head(obj)\n"

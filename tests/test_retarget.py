@@ -18,7 +18,7 @@ from conftest import ROOT
 from mirrorcap.core.common.errors import InputError
 from mirrorcap.core.face.headfit import subdivide
 from mirrorcap.core.face.headio import load_head_npz, save_head_npz
-from mirrorcap.core.face.head import HeadModel
+from mirrorcap.core.face.head import REGIONS, HeadModel
 from mirrorcap.core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take
 from mirrorcap.core.retarget.livelink import BLEND_SHAPE_COUNT, HEADER, livelink_csv, read_livelink_csv, timecode
 from mirrorcap.core.take.c3d import write_c3d
@@ -121,16 +121,20 @@ def _run(args):
                           env=dict(os.environ))
 
 
-def _character(head, keys, tmp_path):
+def _character(head, keys, tmp_path, landmarks: bool = False, with_keys: bool = True):
     """Another topology (one midpoint subdivision: 4x the triangles) and proportions (12 % wider,
-    12 % shorter), carrying the same 52 shapes; written as TARGET.blend with bpy."""
+    12 % shorter), carrying the same 52 shapes (its own expressions; written as shape keys only
+    ``with_keys``), and the head's ``lm_*`` landmarks (``landmarks``: the subdivision keeps the
+    head's vertices first); written as TARGET.blend with bpy."""
     T = head.triangles()
     V2, T2 = subdivide(head.vertices, T, 1)
     scale = np.array([1.12, 0.88, 1.0])                      # core x: across the face, y: down
     keys2 = {n: (subdivide(head.vertices + off, T, 1)[0] - V2) * scale for n, off in keys.items()}
+    pad = len(V2) - len(head.vertices)
+    groups = {g: np.r_[w, np.zeros(pad)] for g, w in head.groups.items() if g.startswith("lm_")} if landmarks else {}
     char = HeadModel(vertices=V2 * scale, polygons=T2.ravel(), polygon_sizes=np.full(len(T2), 3),
-                     groups={}, name="Character")
-    save_head_npz(tmp_path / "character.npz", char, keys2)
+                     groups=groups, name="Character")
+    save_head_npz(tmp_path / "character.npz", char, keys2 if with_keys else None)
     code = ("import sys\nfrom mirrorcap.core.face.headio import load_head_npz\n"
             "from mirrorcap.addon.common.headio import write_head_blend\n"
             f"h, k = load_head_npz({str(tmp_path / 'character.npz')!r}, with_shape_keys=True)\n"
@@ -207,3 +211,91 @@ def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):
     res = _run(["-m", "mirrorcap", "retarget", tmp_path / "holey.c3d", "--head", HEAD_BLEND, "--target", HEAD_BLEND,
                 "-o", out, "--conjecture-unseen"])
     assert res.returncode == 0 and out.exists(), res.stdout + res.stderr
+
+
+def _slit_pairs(head):
+    """Pairs (upper-lip vertex, lower-lip vertex) of the lips' visible (forward-facing) surfaces in the
+    same column (within 1 mm across), at most 6 mm apart at rest, away from the corners: the lips have
+    crossed when a lower one rises above its partner."""
+    lab = head.region_labels()
+    V, lm = head.vertices, head.landmarks()
+    half = 0.8 * abs(V[lm["mouth_corner_l"], 0] - V[lm["mouth_corner_r"], 0]) / 2
+    outer = (head.vertex_normals() @ head.face_axes()["forward"] > 0.5) & (np.abs(V[:, 0]) < half)
+    up = np.flatnonzero(outer & (lab == REGIONS.index("upper_lip")))
+    low = np.flatnonzero(outer & (lab == REGIONS.index("lower_lip")))
+    u, l_ = np.meshgrid(up, low, indexing="ij")
+    sep0 = V[l_, 1] - V[u, 1]
+    keep = (np.abs(V[u, 0] - V[l_, 0]) < 1.0) & (sep0 < 6.0)
+    return u[keep], l_[keep]
+
+
+def test_transfer_onto_a_character_without_shape_keys(tmp_path, head_and_keys):
+    """`retarget --method transfer` onto a character of another topology and proportions that has
+    landmarks and no shape keys, read back from OUT.blend with bpy (evaluated mesh): moving vertices
+    within 1 mm mean of the character's own expression; the lids close where the actor's do; the
+    lips never cross."""
+    head, keys = head_and_keys
+    labels, pts, W = arkit_take(head, keys, frames=90, seed=9, full_blinks=True)
+    write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
+    char, keys2 = _character(head, keys, tmp_path, landmarks=True, with_keys=False)
+    out = tmp_path / "out.blend"
+    res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.c3d", "--head", HEAD_BLEND, "--target",
+                tmp_path / "target.blend", "-o", out, "--method", "transfer", "--report", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "transferred 90 frames onto Character" in res.stdout
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["mode"] == "frames" and report["lids"] == "actor's eyeBlink weights"
+    assert report["region_scales"]["upper"][0] == pytest.approx(1.12, abs=0.01)      # 12 % wider
+    assert report["region_scales"]["lower"][1] == pytest.approx(0.88, abs=0.015)     # 12 % shorter
+    r = _run([ROOT / "tests" / "blender" / "readback.py", out, "Character", tmp_path / "rb.npz"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    to_core = lambda p: 1000.0 * np.stack([p[..., 0], -p[..., 2], p[..., 1]], -1)  # noqa: E731
+    seen = to_core(np.load(tmp_path / "rb.npz")["evaluated"])
+    truth = char.vertices[None] + np.einsum("fk,kvd->fvd", W, np.stack([keys2[n] for n in CHANNELS]))
+    err = np.linalg.norm(seen - truth, axis=2)
+    moving = np.linalg.norm(truth - char.vertices[None], axis=2) > 1.0
+    print(f"transfer: moving vertices {err[moving].mean():.3f} mm mean (p95 {np.percentile(err[moving], 95):.3f}, "
+          f"max {err.max():.2f}); all vertices {np.sqrt(np.mean(err ** 2)):.3f} mm RMS")
+    assert moving.sum() > 1000 and err[moving].mean() < 1.0
+    # the lids: where the actor's blink is full, the character's upper-lid margin is where its own
+    # blink puts it; where the actor's lid is open, it stays open
+    for side, name in (("l", "eyeBlinkLeft"), ("r", "eyeBlinkRight")):
+        margin = int(np.argmax(head.groups[f"eyelid_upper_{side}"]))
+        w = W[:, CHANNELS.index(name)]
+        travel = np.linalg.norm(keys2[name][margin])
+        shut, open_ = w > 0.95, w < 0.05
+        assert shut.sum() >= 2 and open_.sum() >= 10 and travel > 5.0
+        gap = np.linalg.norm(seen[:, margin] - truth[:, margin], axis=1)
+        closed = 1.0 - np.linalg.norm(seen[shut, margin] - (char.vertices[margin] + keys2[name][margin]), axis=1) / travel
+        print(f"lid {side}: closed {closed.min():.3f} of the way on the {shut.sum()} full-blink frames; "
+              f"open frames within {gap[open_].max():.2f} mm")
+        assert closed.min() > 0.9 and gap[open_].max() < 1.0
+    # the lips never cross
+    up, low = _slit_pairs(head)
+    down = np.array([0.0, 1.0, 0.0])                                           # core y: down
+    sep = np.einsum("fpd,d->fp", seen[:, low] - seen[:, up], down)
+    sep_true = np.einsum("fpd,d->fp", truth[:, low] - truth[:, up], down)
+    print(f"lips: {len(up)} slit pairs, least separation {sep.min():.2f} mm (the character's own: {sep_true.min():.2f})")
+    # the character's own shapes roll and press the lips (its lower lip's face rises up to ~0.9 mm over the
+    # upper's in some frames): the transfer may go as far as they do, never further, in every frame
+    assert len(up) >= 5 and np.all(sep.min(1) > np.minimum(sep_true.min(1), 0.0) - 0.3)
+
+
+def test_transfer_bad_input_writes_nothing(tmp_path, head_and_keys):
+    head, keys = head_and_keys
+    labels, pts, _ = arkit_take(head, keys, frames=10, seed=7)
+    write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
+    _character(head, keys, tmp_path, landmarks=False, with_keys=False)          # no landmarks
+    out = tmp_path / "out.blend"
+    base = ["-m", "mirrorcap", "retarget", tmp_path / "take.c3d", "--head", HEAD_BLEND, "-o", out,
+            "--method", "transfer", "--report", tmp_path / "r.json"]
+    res = _run(base + ["--target", tmp_path / "target.blend"])
+    assert res.returncode == 2 and "no mesh with landmark vertex groups" in res.stderr, res.stdout + res.stderr
+    res = _run(base + ["--target", tmp_path / "target.blend", "--target-object", "Character"])
+    assert res.returncode == 2 and "lacks the landmark vertex groups lm_nose_tip" in res.stderr, res.stderr
+    res = _run(base + ["--target", HEAD_BLEND, "--target-object", "Nobody"])
+    assert res.returncode == 2 and "no object named 'Nobody'" in res.stderr, res.stderr
+    res = _run(base + ["--target", HEAD_BLEND, "--csv", tmp_path / "x.csv"])
+    assert res.returncode == 2 and "--csv writes ARKit weights" in res.stderr, res.stderr
+    assert not out.exists() and not (tmp_path / "r.json").exists() and not (tmp_path / "x.csv").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]

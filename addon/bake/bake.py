@@ -1,16 +1,8 @@
 """Baking a take onto a head as shape keys (``mirrorcap bake`` and ``MIRRORCAP_OT_bake``).
 
 Data flow: TAKE.c3d -> :func:`core.face.bind.bind_take` -> :class:`core.face.facerig.FaceRig`
--> displacements ``(F, V, 3)`` -> shape keys here. Shape-key coordinates go through
-``foreach_set``; keyframes through ``keyframe_points.foreach_set``. Blender has no
-call that creates many shape keys or F-curves at once, so there is one
-``shape_key_add`` and one F-curve per key -- each filled in a single array call.
-
-``frames``: key ``frame_00001`` .. one per take frame, its value keyed 0-1-0 with
-constant interpolation so exactly that frame's key is 1 at its frame.
-``pca``: keys ``mode_01`` .. ``mode_K`` (eigen-deformations, see :mod:`core.face.shapes`) with
-linear-interpolated value keys on every frame; slider range -1..1.
-Head motion (optional): the object's location and quaternion rotation keyed per frame.
+-> displacements ``(F, V, 3)`` -> shape keys (:func:`..common.shape_keys.bake_displacements`:
+frame keys or PCA keys, and the head motion).
 """
 
 from __future__ import annotations
@@ -26,94 +18,10 @@ from ...core.common.errors import InputError
 from ...core.face.animate import animate_take, head_pose_from_report, unseen_policy
 from ...core.face.bind import load_marker_map
 from ...core.face.facerig import RigSettings
-from ...core.face.shapes import pca_shapes
 from ...core.retarget.mpeg4 import read_fap, replay_take
 from ...core.take.c3d import read_c3d
-from ..common.frames import core_rotation_to_blender, core_to_blender
-from ..common.keys import key_fcurves
+from ..common.shape_keys import MODES, bake_displacements
 from ..common.headio import find_head_object, head_feature_points, open_blend, read_head, save_blend_atomically
-
-MODES = ("frames", "pca")
-
-
-def _clear_mirrorcap_keys(obj):
-    key = obj.data.shape_keys
-    if key is None:
-        return
-    for kb in [kb for kb in key.key_blocks if kb.name.startswith(("frame_", "mode_"))]:
-        obj.shape_key_remove(kb)
-
-
-def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_modes: int = 8,
-                       frame_start: int = 1, head_motion=None, progress=None) -> dict:
-    """Write ``displacements (F, V, 3)`` (core mm, head frame) onto ``obj`` as shape keys."""
-    if mode not in MODES:
-        raise InputError(f"--mode must be one of {', '.join(MODES)}")
-    D = np.asarray(displacements, float)
-    F, V = D.shape[:2]
-    if V != len(obj.data.vertices):
-        raise InputError(f"{V} displacements for a head of {len(obj.data.vertices)} vertices")
-    _clear_mirrorcap_keys(obj)
-    if obj.data.shape_keys is None:
-        obj.shape_key_add(name="Basis", from_mix=False)
-    key = obj.data.shape_keys
-    key.use_relative = True
-    if key.animation_data is None:
-        key.animation_data_create()
-    action = bpy.data.actions.new(f"{obj.name}_mirrorcap")
-    key.animation_data.action = action
-    frames = frame_start + np.arange(F)
-    out = {"mode": mode, "frames": int(F), "vertices": int(V)}
-    if mode == "frames":
-        names = [f"frame_{i + 1:05d}" for i in range(F)]
-        for i, name in enumerate(names):
-            kb = obj.shape_key_add(name=name, from_mix=False)
-            kb.value = 0.0  # its F-curve sets it to 1 on its own frame only
-            kb.points.foreach_set("co", core_to_blender(neutral_mm + D[i]).astype(np.float32).ravel())
-            if progress and i % 100 == 0:
-                progress(i / F)
-        # each key: 0 the frame before, 1 on its frame, 0 the frame after (constant steps)
-        kf = np.stack([frames - 1, frames, frames + 1], 1)
-        key_fcurves(key, action, names, kf, np.tile([0.0, 1.0, 0.0], (F, 1)), "CONSTANT")
-    else:
-        pca = pca_shapes(D, n_modes)
-        names = [f"mode_{k + 1:02d}" for k in range(n_modes)]
-        for k, name in enumerate(names):
-            kb = obj.shape_key_add(name=name, from_mix=False)
-            kb.slider_min, kb.slider_max, kb.value = -1.0, 1.0, 0.0
-            kb.points.foreach_set("co", core_to_blender(neutral_mm + pca.modes[k]).astype(np.float32).ravel())
-        key_fcurves(key, action, names, frames, pca.weights.T, "LINEAR")
-        out.update({"modes": int(n_modes), "pca_max_error_mm": pca.max_error_mm, "pca_mean_error_mm": pca.mean_error_mm,
-                    "energy": [float(e) for e in pca.energy]})
-    if head_motion is not None:
-        R, t = head_motion
-        Rb = np.array([core_rotation_to_blender(r) for r in R])
-        quat = _quaternions(Rb)
-        loc = np.asarray(obj.location)[None] + core_to_blender(t)
-        obj.rotation_mode = "QUATERNION"
-        obj.animation_data_create()
-        oact = bpy.data.actions.new(f"{obj.name}_head_motion")
-        obj.animation_data.action = oact
-        for path, vals in (("location", loc), ("rotation_quaternion", quat)):
-            for axis in range(vals.shape[1]):
-                fc = oact.fcurve_ensure_for_datablock(obj, path, index=axis)
-                fc.keyframe_points.add(F)
-                fc.keyframe_points.foreach_set("co", np.column_stack([frames, vals[:, axis]]).astype(np.float32).ravel())
-                fc.update()
-        out["head_motion"] = True
-    scene = bpy.context.scene
-    scene.frame_start, scene.frame_end = int(frame_start), int(frame_start + F - 1)
-    return out
-
-
-def _quaternions(R):
-    """(w, x, y, z) unit quaternions of rotation matrices ``(F, 3, 3)``, sign-continuous."""
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]]
-    flip = np.r_[1.0, np.sign(np.einsum("fi,fi->f", q[1:], q[:-1]))]
-    return q * np.cumprod(np.where(flip == 0, 1.0, flip))[:, None]
-
 
 def fap_as_take(track, obj, head):
     """A .fap track (:func:`core.retarget.mpeg4.read_fap`) as the take ``bake`` animates on the

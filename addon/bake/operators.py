@@ -196,7 +196,7 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
         return work
 
     def finish(self, context, result):
-        from .bake import bake_displacements
+        from ..common.shape_keys import bake_displacements
 
         head, binding, D, rate = result
         obj = bpy.data.objects[self._obj_name]

@@ -23,6 +23,8 @@ ADDON_ID = __package__.rsplit(".", 2)[0]  # the extension package: <...>.mirrorc
 
 LIGHTS = (("uv", "UV", "fluorescent markers under black-light lamps"),
           ("normal", "Normal", "coloured dots under ordinary lamps"))
+RETARGET_METHODS = (("arkit", "ARKit-52", "solve ARKit weights and key the character's shape keys of the same names"),
+                    ("transfer", "Transfer", "carry the motion itself onto a character with lm_* landmarks"))
 BAKE_MODES = (("frames", "Frames", "one shape key per take frame, keyed on its frame"),
               ("pca", "PCA", "K eigen-deformation shape keys with keyed weights (compact)"))
 
@@ -73,7 +75,9 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
                                  description="labels of >= 3 rigid (headband) markers, space-separated; empty: the "
                                              "selected marker empties, or the markers that deform least")
     retarget_target: PointerProperty(name="Character", type=bpy.types.Object, poll=_is_mesh,
-                                     description="the mesh with ARKit-named shape keys that Retarget animates")
+                                     description="the mesh Retarget animates: with ARKit-named shape keys (ARKit-52) "
+                                                 "or lm_* landmarks (Transfer)")
+    retarget_method: EnumProperty(name="Method", items=RETARGET_METHODS, default="arkit")
     livelink_csv: StringProperty(name="Live Link CSV", subtype="FILE_PATH", default="",
                                  description="LIVELINK.csv that Retarget writes (optional)")
     fap_file: StringProperty(name="FAP File", subtype="FILE_PATH", default="//take.fap",

@@ -1,24 +1,33 @@
-"""Retarget (3D View): the scene's take onto a character through the ARKit-52 shapes.
+"""Retarget (3D View): the scene's take onto a character.
 
 The actor is the scene's head (the generic head or the fitted one, carrying the ARKit shape
-keys); the character is any mesh with ARKit-named shape keys. The bind and the solve run as a
-modal job (pure core, no ``bpy``); the character's keys change only once they succeeded."""
+keys). ``arkit``: the character is any mesh with ARKit-named shape keys, keyed with the solved
+weights. ``transfer``: the character is any mesh with ``lm_<name>`` landmarks (Place Landmarks,
+Guess the Rest); the motion itself is carried onto it as frame or PCA keys. The work runs as a
+modal job (pure core, no ``bpy``); the character changes only once it succeeded."""
 
 from __future__ import annotations
 
 import bpy
-from bpy.props import FloatProperty, IntProperty, StringProperty
+from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ...core.common.errors import InputError
 from ..common.inputs import head_object_from, input_path, required, scene_marker_map, scene_settings
 from ..common.jobs import MirrorCapJobOperator
+from ..common.properties import BAKE_MODES, RETARGET_METHODS
 
 
 class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
-    """Solve the take's ARKit-52 weights on the actor's head and key them on the character's shape keys"""
+    """Retarget the take onto the character: ARKit-52 weights on its shape keys, or the motion itself
+(transfer) onto a character with landmarks"""
 
     bl_idname = "mirrorcap.retarget"
     bl_label = "Retarget Take"
+
+    method: EnumProperty(name="Method", items=(("SCENE", "Scene", "the Retarget panel's method"),) + RETARGET_METHODS,
+                         default="SCENE")
+    mode: EnumProperty(name="Keys", items=(("SCENE", "Scene", "the Bake panel's mode"),) + BAKE_MODES,
+                       default="SCENE", description="transfer: frame keys or PCA keys")
 
     take: StringProperty(name="Take", subtype="FILE_PATH", description="TAKE.c3d (default: the scene's)")
     head_object: StringProperty(name="Actor", description="the actor's head with ARKit shape keys (default: the scene's head)")
@@ -35,9 +44,12 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         actor = head_object_from(context, self.head_object)
         target = bpy.data.objects.get(self.target_object) if self.target_object else s.retarget_target
         if target is None or target.type != "MESH":
-            raise InputError("choose the character (a mesh with ARKit shape keys) first")
+            raise InputError("choose the character (a mesh with ARKit shape keys, or with landmarks) first")
         if target == actor:
             raise InputError("the character is the actor's head itself: choose another mesh")
+        self._method = s.retarget_method if self.method == "SCENE" else self.method
+        if self._method == "transfer":
+            return self._prepare_transfer(context, s, actor, target)
         if target.data.shape_keys is None:
             raise InputError(f"{target.name} has no shape keys")
         csv = input_path(self.csv or s.livelink_csv, must_exist=False)
@@ -63,11 +75,52 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
 
         return work
 
+    def _prepare_transfer(self, context, s, actor, target):
+        from ...core.retarget.transfer import check_landmarks
+        from ...core.take.c3d import read_c3d
+        from ..common.headio import read_head, read_shape_keys
+
+        data = read_c3d(required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)"))
+        head = read_head(actor)
+        head.validate()
+        keys = read_shape_keys(actor)
+        character = read_head(target)
+        check_landmarks(character, "character")
+        mapping = scene_marker_map(context)
+        self._target, self._rate = target.name, data["rate"]
+        self._mode, self._modes = (s.bake_mode if self.mode == "SCENE" else self.mode), s.modes
+        if self._mode == "pca" and not 1 <= self._modes <= len(data["points"]):
+            raise InputError(f"Modes must be between 1 and the take's {len(data['points'])} frames")
+
+        def work(progress):
+            from ...core.retarget.transfer import transfer_take
+
+            tr = transfer_take(head, keys, character, data["labels"], data["points"], data["rate"],
+                               neutral_frame=self.neutral_frame, marker_map=mapping, unseen="conjecture",
+                               progress=lambda f, text: progress(0.9 * f, text))
+            progress(0.95, "keying")
+            return character, tr
+
+        return work
+
+    def _finish_transfer(self, context, result):
+        from ..common.shape_keys import bake_displacements
+
+        character, tr = result
+        target = bpy.data.objects[self._target]
+        out = bake_displacements(target, character.vertices, tr.displacements, self._mode, self._modes)
+        context.scene.render.fps = max(1, int(round(self._rate)))
+        sc = tr.scales
+        return (f"transferred {out['frames']} frames onto {target.name} ({self._mode} keys); scales upper "
+                f"{'/'.join(f'{v:.2f}' for v in sc['upper'])}, lower {'/'.join(f'{v:.2f}' for v in sc['lower'])}")
+
     def finish(self, context, result):
         from ...core.common.files import write_files_atomically
         from ...core.retarget.livelink import livelink_csv
         from .retarget import key_weights
 
+        if self._method == "transfer":
+            return self._finish_transfer(context, result)
         solve, angles = result
         target = bpy.data.objects[self._target]
         text = livelink_csv(solve.weights, solve.names, self._rate, head=angles) if self._csv else None
@@ -131,4 +184,6 @@ class MIRRORCAP_OT_export_faps(MirrorCapJobOperator):
         return f"{int(track.mask.sum())} FAPs over {track.frames} frames -> {self._out.name}"
 
 
-OPERATORS = (MIRRORCAP_OT_retarget, MIRRORCAP_OT_export_faps)
+from .landmarks import OPERATORS as LANDMARK_OPERATORS  # noqa: E402
+
+OPERATORS = (MIRRORCAP_OT_retarget, MIRRORCAP_OT_export_faps) + LANDMARK_OPERATORS

@@ -16,9 +16,25 @@ class MIRRORCAP_PT_retarget(SidebarPanel, bpy.types.Panel):
         col = self.layout.column()
         col.prop(s, "head_object", text="Actor")
         col.prop(s, "retarget_target")
-        col.prop(s, "livelink_csv")
+        col.prop(s, "retarget_method")
+        if s.retarget_method == "transfer":
+            from .landmarks import LANDMARK_ORDER, next_landmark, placed_landmarks
+
+            placed = placed_landmarks(s.retarget_target)
+            nxt = next_landmark(placed)
+            col.label(text=f"Landmarks {len([n for n in LANDMARK_ORDER if n in placed])}/{len(LANDMARK_ORDER)}"
+                           + (f", next: lm_{nxt}" if nxt else ""), icon="PIVOT_CURSOR")
+            row = col.row(align=True)
+            row.operator("mirrorcap.place_landmarks", icon="RESTRICT_SELECT_OFF")
+            row.operator("mirrorcap.guess_landmarks", icon="SHADERFX")
+            row = col.row(align=True)
+            row.prop(s, "bake_mode", text="Keys")
+            if s.bake_mode == "pca":
+                row.prop(s, "modes")
+        else:
+            col.prop(s, "livelink_csv")
         col.operator("mirrorcap.retarget", icon="ARMATURE_DATA")
-        col.label(text="ARKit-52 weights; Esc cancels", icon="INFO")
+        col.label(text="Esc cancels", icon="INFO")
         col.separator()
         col.label(text="MPEG-4 facial animation parameters")
         col.prop(s, "fap_file")

@@ -1,10 +1,14 @@
-"""``mirrorcap retarget``: a take onto another character through the 52 ARKit shapes.
+"""``mirrorcap retarget``: a take onto another character.
 
-Data flow: TAKE.c3d -> :func:`core.face.bind.bind_take` on the actor's head (HEAD.blend: the
+``arkit``: TAKE.c3d -> :func:`core.face.bind.bind_take` on the actor's head (HEAD.blend: the
 generic head or the head fitted to the performer, carrying the ARKit shape keys) ->
 :func:`core.retarget.arkit.solve_weights` -> the target's shape keys of the same names
 (matched case-insensitively) keyed on every frame in TARGET.blend, saved as OUT.blend; the
 Live Link Face CSV and RETARGET.json beside it.
+
+``transfer``: TAKE.c3d -> :func:`core.retarget.transfer.transfer_take` (the actor's dense motion,
+carried onto the target's surface through its ``lm_<name>`` landmarks and scaled by feature
+distances) -> frame shape keys or PCA keys on the target, as ``bake`` writes them.
 """
 
 from __future__ import annotations
@@ -22,11 +26,31 @@ from ...core.face.animate import head_pose_from_report, unseen_policy
 from ...core.face.bind import load_marker_map
 from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take
 from ...core.retarget.livelink import livelink_csv, read_livelink_csv
+from ...core.retarget.transfer import TRANSFER_LANDMARKS, transfer_take
 from ...core.take.c3d import read_c3d
+from ..common.shape_keys import MODES, bake_displacements
 from ..common.headio import find_head_object, open_blend, read_head, read_shape_keys, save_blend_atomically
 from ..common.keys import key_fcurves
 
-METHODS = ("arkit",)
+METHODS = ("arkit", "transfer")
+
+
+def find_landmarked_object(name: str | None):
+    """The named object, or the only mesh carrying ``lm_<name>`` landmark groups (motion transfer's target)."""
+    if name:
+        return find_target_object(name)
+    found = [o for o in bpy.data.objects if o.type == "MESH"
+             and any(vg.name.startswith("lm_") for vg in o.vertex_groups)]
+    if len(found) == 1:
+        return found[0]
+    if not found:
+        meshes = [o.name for o in bpy.data.objects if o.type == "MESH"]
+        raise InputError("the target file has no mesh with landmark vertex groups ("
+                         + ", ".join(f"lm_{n}" for n in TRANSFER_LANDMARKS[:3]) + ", ...); place them with the "
+                         "Retarget panel's Place Landmarks, or name the object with --target-object"
+                         + (f" (meshes: {', '.join(meshes)})" if meshes else ""))
+    raise InputError("the target file has several meshes with landmarks; name one with --target-object: "
+                     + ", ".join(o.name for o in found))
 
 
 def find_target_object(name: str | None):
@@ -101,10 +125,20 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
 def run_retarget(take, head_blend, target_blend, output, target_object=None, method: str = "arkit",
                  csv=None, head_pose_report=None, report=None, marker_map=None, neutral_frame: int = 0,
                  smoothness: float | None = None, head_object=None, drop_unseen: bool = False,
-                 conjecture_unseen: bool = False) -> dict:
-    """The whole ``mirrorcap retarget``. Every output is written only once all succeeded."""
+                 conjecture_unseen: bool = False, mode: str = "frames", n_modes: int = 8, progress=None) -> dict:
+    """The whole ``mirrorcap retarget``. Every output is written only once all succeeded.
+    ``mode``/``n_modes``: how ``transfer`` keys the target (``bake``'s frame or PCA keys)."""
     if method not in METHODS:
         raise InputError(f"--method must be one of {', '.join(METHODS)}")
+    if method == "transfer":
+        if csv is not None:
+            raise InputError("--csv writes ARKit weights: it belongs to --method arkit")
+        if smoothness is not None:
+            raise InputError("--smoothness belongs to --method arkit")
+        return run_transfer(take, head_blend, target_blend, output, target_object=target_object,
+                            head_pose_report=head_pose_report, report=report, marker_map=marker_map,
+                            neutral_frame=neutral_frame, head_object=head_object, drop_unseen=drop_unseen,
+                            conjecture_unseen=conjecture_unseen, mode=mode, n_modes=n_modes, progress=progress)
     for path in (output, csv, report):
         if path is not None and not Path(path).resolve().parent.is_dir():
             raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
@@ -144,4 +178,52 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     if report is not None:
         files[Path(report)] = json.dumps(result, indent=1) + "\n"
     write_files_atomically(files)
+    return result
+
+
+def run_transfer(take, head_blend, target_blend, output, target_object=None, head_pose_report=None, report=None,
+                 marker_map=None, neutral_frame: int = 0, head_object=None, drop_unseen: bool = False,
+                 conjecture_unseen: bool = False, mode: str = "frames", n_modes: int = 8, progress=None) -> dict:
+    """``mirrorcap retarget --method transfer``: the take's motion onto a character with landmarks
+    and no shape keys (:func:`core.retarget.transfer.transfer_take`), keyed as ``bake`` keys a head."""
+    if mode not in MODES:
+        raise InputError(f"--mode must be one of {', '.join(MODES)}")
+    for path in (output, report):
+        if path is not None and not Path(path).resolve().parent.is_dir():
+            raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
+    t0 = time.perf_counter()
+    data = read_c3d(take)
+    F = data["points"].shape[0]
+    if mode == "pca" and not 1 <= n_modes <= F:
+        raise InputError(f"--modes must be between 1 and the take's {F} frames")
+    pose = None if head_pose_report is None else head_pose_from_report(head_pose_report, F)
+    mapping = load_marker_map(marker_map) if marker_map else None
+    open_blend(head_blend)
+    actor = find_head_object(head_object)
+    actor_name = actor.name
+    head = read_head(actor)
+    head.validate()
+    shape_keys = read_shape_keys(actor)
+    open_blend(target_blend)
+    target_obj = find_landmarked_object(target_object)
+    target = read_head(target_obj)
+    t1 = time.perf_counter()
+    tr = transfer_take(head, shape_keys, target, data["labels"], data["points"], data["rate"],
+                       neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
+                       unseen=unseen_policy(drop_unseen, conjecture_unseen),
+                       progress=None if progress is None else (lambda f, text: progress(0.8 * f, text)))
+    t2 = time.perf_counter()
+    keyed = bake_displacements(target_obj, target.vertices, tr.displacements, mode, n_modes,
+                               progress=None if progress is None else (lambda f: progress(0.8 + 0.15 * f, "keys")))
+    scene = bpy.context.scene
+    scene.render.fps = max(1, int(round(data["rate"])))
+    t3 = time.perf_counter()
+    result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
+              "target_object": target_obj.name, "output": str(output), "method": "transfer", "frames": F,
+              "rate": data["rate"], "markers": len(tr.binding.labels), **keyed, **tr.report(),
+              "timings_s": {"read_s": t1 - t0, "transfer_s": t2 - t1, "keys_s": t3 - t2}}
+    save_blend_atomically(output)
+    result["timings_s"]["total_s"] = time.perf_counter() - t0
+    if report is not None:
+        write_files_atomically({Path(report): json.dumps(result, indent=1) + "\n"})
     return result

@@ -127,4 +127,52 @@ out["play_fap_keys"] = len(head.data.shape_keys.key_blocks)
 before = [kb.name for kb in head.data.shape_keys.key_blocks]
 out["play_bad"] = call(bpy.ops.mirrorcap.bake, fap=str(work / "bad.fap"))
 out["play_bad_unchanged"] = [kb.name for kb in head.data.shape_keys.key_blocks] == before
+
+# 7. Transfer onto a character with no shape keys and no groups: its landmarks clicked (a ray onto the
+#    mesh, as the modal operator casts from the mouse), four by vertex, the rest guessed
+from mathutils import Vector  # noqa: E402
+
+from mirrorcap.addon.common.headio import GENERIC_HEAD, new_head_object  # noqa: E402
+from mirrorcap.addon.retarget.landmarks import vertex_under_ray  # noqa: E402
+from mirrorcap.core.face.head import HeadModel  # noqa: E402
+from mirrorcap.core.face.headio import load_head_npz  # noqa: E402
+
+generic = load_head_npz(GENERIC_HEAD)
+lm = generic.landmarks()
+plain = new_head_object(HeadModel(vertices=generic.vertices * [1.1, 0.95, 1.0], polygons=generic.polygons,
+                                  polygon_sizes=generic.polygon_sizes, groups={}, name="Plain"))
+plain.location = (0.5, 0.0, 0.0)
+bpy.context.view_layer.update()
+s.retarget_target = plain
+s.retarget_method = "transfer"
+out["transfer_no_landmarks"] = call(bpy.ops.mirrorcap.retarget)
+nose = plain.matrix_world @ plain.data.vertices[lm["nose_tip"]].co
+clicked = vertex_under_ray(plain, nose + Vector((0.0, -0.5, 0.0)), Vector((0.0, 1.0, 0.0)))
+out["clicked_nose_mm"] = 1000 * (plain.data.vertices[clicked].co - plain.data.vertices[lm["nose_tip"]].co).length
+out["place"] = [call(bpy.ops.mirrorcap.place_landmarks, vertex=clicked)]
+for name in ("eye_inner_l", "eye_outer_l", "eye_inner_r"):        # the order Place Landmarks asks
+    out["place"].append(call(bpy.ops.mirrorcap.place_landmarks, vertex=lm[name]))
+out["transfer_missing"] = call(bpy.ops.mirrorcap.retarget)
+out["guess"] = call(bpy.ops.mirrorcap.guess_landmarks)
+from mirrorcap.addon.common.headio import read_head  # noqa: E402
+
+placed = read_head(plain).landmarks()
+out["guessed_off"] = {n: 1000 * (plain.data.vertices[v].co - plain.data.vertices[lm[n]].co).length
+                      for n, v in placed.items()}
+out["transfer_cancel"] = call(bpy.ops.mirrorcap.retarget, cancel_after_steps=2)
+out["transfer_cancel_unchanged"] = plain.data.shape_keys is None
+s.bake_mode = "frames"
+out["transfer"] = call(bpy.ops.mirrorcap.retarget)
+out["transfer_keys"] = len(plain.data.shape_keys.key_blocks)
+depsgraph = bpy.context.evaluated_depsgraph_get()
+moved = 0.0
+for f in (5, 12):
+    scene.frame_set(f)
+    ev = plain.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    co = np.empty(3 * len(plain.data.vertices), np.float32)
+    ev.data.vertices.foreach_get("co", co)
+    rest = np.empty_like(co)
+    plain.data.shape_keys.reference_key.points.foreach_get("co", rest)
+    moved = max(moved, float(np.abs(co - rest).max()) * 1000)
+out["transfer_moved_mm"] = moved
 print("RESULT " + json.dumps(out))

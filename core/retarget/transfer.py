@@ -1,0 +1,334 @@
+"""Motion transfer: a take captured on the actor's head drives another character's mesh, which
+needs no shape keys and no MirrorCap groups -- only ``lm_<name>`` landmarks
+(Lin 2003, section 7.3 and figure 7.13; Huang, Lin & Ouhyoung 2000, section 4).
+
+1. **The actor's dense motion.** The take binds to the actor's head (:func:`..face.bind.bind_take`).
+   Where the head carries the ARKit expressions (the generic head, and the head fitted to the
+   performer through the same fit), their weights (:func:`.arkit.solve_weights`) give a dense prior
+   ``sum_k w_k S_k``; the face rig (regions, jaw rule, inner lip; :class:`..face.facerig.FaceRig`)
+   then scatters the markers' departures from that prior, so every marker's vertex still follows its
+   marker exactly and motion outside the shapes' span is kept. The lids close where the actor's
+   ``eyeBlink`` weights say (the rig's random blinks only when the head has no such shape).
+2. **Correspondence** (:func:`correspond`). The actor's head is fitted onto the target's surface by
+   the scan-fit path (:func:`..face.headfit.fit_head`: landmark similarity, landmark RBF of eq.
+   7.1-7.2, then projection rounds). Each target vertex takes the nearest point of the fitted
+   actor's triangles; its barycentric weights form the sparse transport matrix.
+3. **Scaling by feature distances** (seed 001, section 4). Displacements are expressed in the face's
+   own axes (lateral, down, forward) and scaled per axis by the target-to-actor ratio of feature
+   distances: for the upper face the distance between the eyes and from the eye line to the nose
+   tip; for the lower face the mouth width and the nose-tip-to-chin distance; in depth the
+   distance from the cheek line (the outer eye corners) forward to the upper lip. The upper and
+   lower scales blend from the nose tip down to the upper lip. Then they are turned into the
+   target's axes.
+
+Shapes: actor motion ``(F, Va, 3)``, target motion ``(F, Vt, 3)``, millimetres, each head's frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..common.errors import InputError
+from ..face.bind import Binding, bind_take
+from ..face.facerig import FaceRig, RigSettings
+from ..face.head import LANDMARKS, HeadModel
+from ..face.headfit import fit_head
+from .arkit import arkit_basis, solve_weights
+
+#: the landmarks motion transfer needs on both heads (``lm_lower_lip`` is optional)
+TRANSFER_LANDMARKS = ("nose_tip", "eye_inner_l", "eye_outer_l", "eye_inner_r", "eye_outer_r", "mouth_corner_l",
+                      "mouth_corner_r", "chin", "upper_lip", "tragus_l", "tragus_r")
+FEATURES = ("eye_distance", "eye_to_nose", "mouth_width", "nose_to_chin", "cheek_to_lip")
+FACING_PENALTY_MM = 2.0  # correspondence cost of a triangle facing the opposite way (x (1 - cos))
+REACH_MM = 12.0          # a target vertex further than this from the fitted actor fades out of the motion
+
+
+def missing_landmarks(head: HeadModel) -> list:
+    """The :data:`TRANSFER_LANDMARKS` ``head`` lacks, as group names (``lm_<name>``)."""
+    lms = head.landmarks()
+    return [f"lm_{n}" for n in TRANSFER_LANDMARKS if n not in lms]
+
+
+def check_landmarks(head: HeadModel, role: str) -> None:
+    missing = missing_landmarks(head)
+    if missing:
+        raise InputError(f"the {role} {head.name!r} lacks the landmark vertex groups {', '.join(missing)} "
+                         "(place them with the Retarget panel's Place Landmarks, or name vertex groups so)")
+
+
+def face_frame(head: HeadModel) -> tuple[np.ndarray, np.ndarray]:
+    """The face's axes as rows ``(3, 3)`` (lateral, down, forward) and its origin (between the tragi)."""
+    ax = head.face_axes()
+    return np.stack([ax["lateral"], ax["down"], ax["forward"]]), ax["origin"]
+
+
+def feature_distances(head: HeadModel) -> dict:
+    """Seed 001's feature distances (section 4) from the landmarks, in mm: see the module text."""
+    check_landmarks(head, "head")
+    lm, V = head.landmarks(), head.vertices
+    A, _ = face_frame(head)
+    p = {n: A @ V[i] for n, i in lm.items()}          # landmark coordinates in the face's axes
+    eye_l = 0.5 * (p["eye_inner_l"] + p["eye_outer_l"])
+    eye_r = 0.5 * (p["eye_inner_r"] + p["eye_outer_r"])
+    eye_line = 0.5 * (eye_l[1] + eye_r[1])
+    cheek = 0.5 * (p["eye_outer_l"][2] + p["eye_outer_r"][2])
+    out = {"eye_distance": abs(eye_l[0] - eye_r[0]),
+           "eye_to_nose": p["nose_tip"][1] - eye_line,
+           "mouth_width": abs(p["mouth_corner_l"][0] - p["mouth_corner_r"][0]),
+           "nose_to_chin": p["chin"][1] - p["nose_tip"][1],
+           "cheek_to_lip": p["upper_lip"][2] - cheek}
+    bad = [k for k, v in out.items() if not v > 1.0]
+    if bad:
+        raise InputError(f"the landmarks of {head.name!r} give no usable {', '.join(bad)} (landmarks misplaced?)")
+    return {k: float(v) for k, v in out.items()}
+
+
+def region_scales(actor: HeadModel, target: HeadModel) -> dict:
+    """Per-axis scale factors ``{"upper": (lateral, down, forward), "lower": (...)}``, target over actor."""
+    a, t = feature_distances(actor), feature_distances(target)
+    r = {k: t[k] / a[k] for k in FEATURES}
+    return {"upper": [r["eye_distance"], r["eye_to_nose"], r["cheek_to_lip"]],
+            "lower": [r["mouth_width"], r["nose_to_chin"], r["cheek_to_lip"]],
+            "feature_distances_mm": {"actor": a, "target": t}}
+
+
+def lower_face_weight(head: HeadModel, points) -> np.ndarray:
+    """0 above the nose tip, 1 below the upper lip, linear between (in the face's down axis)."""
+    A, _ = face_frame(head)
+    lm = head.landmarks()
+    y = np.asarray(points, float) @ A[1]
+    y0, y1 = head.vertices[lm["nose_tip"]] @ A[1], head.vertices[lm["upper_lip"]] @ A[1]
+    return np.clip((y - y0) / max(y1 - y0, 1e-6), 0.0, 1.0)
+
+
+def _closest_on_triangles(P, A, B, C):
+    """Closest points of ``P (n, 3)`` on triangles ``A, B, C (n, 3)``: barycentric ``(n, 3)`` and distance."""
+    AB, AC, AP = B - A, C - A, P - A
+    d1, d2 = np.einsum("ij,ij->i", AB, AP), np.einsum("ij,ij->i", AC, AP)
+    BP, CP = P - B, P - C
+    d3, d4 = np.einsum("ij,ij->i", AB, BP), np.einsum("ij,ij->i", AC, BP)
+    d5, d6 = np.einsum("ij,ij->i", AB, CP), np.einsum("ij,ij->i", AC, CP)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    bary = np.zeros((len(P), 3))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = va + vb + vc
+        v, w = vb / den, vc / den
+        bary[:] = np.c_[1 - v - w, v, w]                                     # inside the face
+        # Voronoi regions of the vertices and edges (Ericson, Real-Time Collision Detection, 5.1.5)
+        e_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
+        t = d1 / (d1 - d3)
+        bary[e_ab] = np.c_[1 - t, t, 0 * t][e_ab]
+        e_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
+        t = d2 / (d2 - d6)
+        bary[e_ac] = np.c_[1 - t, 0 * t, t][e_ac]
+        e_bc = (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        bary[e_bc] = np.c_[0 * t, 1 - t, t][e_bc]
+    bary[(d1 <= 0) & (d2 <= 0)] = [1, 0, 0]
+    bary[(d3 >= 0) & (d4 <= d3)] = [0, 1, 0]
+    bary[(d6 >= 0) & (d5 <= d6)] = [0, 0, 1]
+    bary = np.nan_to_num(bary, nan=1.0 / 3.0)
+    Q = bary[:, :1] * A + bary[:, 1:2] * B + bary[:, 2:] * C
+    return bary, np.linalg.norm(P - Q, axis=1)
+
+
+def guess_landmarks(generic: HeadModel, target: HeadModel, rounds: int = 4) -> dict:
+    """A first guess of the landmarks ``target`` lacks, from the ones it has (at least 4 the generic head
+    shares): the generic head fitted onto the target by the scan-fit path (:func:`..face.headfit.fit_head`),
+    each missing landmark at the target vertex nearest the fitted generic landmark.
+    Returns ``{name: target vertex}`` for the missing ones."""
+    from scipy.spatial import cKDTree
+
+    have, glm = target.landmarks(), generic.landmarks()
+    shared = [n for n in have if n in glm]
+    if len(shared) < 4:
+        raise InputError(f"a first guess needs at least 4 landmarks placed on {target.name!r} "
+                         f"(it has {len(shared)}: {', '.join(sorted(shared)) or 'none'})")
+    fit = fit_head(generic, target.vertices, target.triangles(), {n: target.vertices[have[n]] for n in shared},
+                   rounds=rounds)
+    missing = [n for n in LANDMARKS if n in glm and n not in have]
+    if not missing:
+        return {}
+    _, idx = cKDTree(target.vertices).query(fit.vertices[[glm[n] for n in missing]])
+    return {n: int(i) for n, i in zip(missing, np.atleast_1d(idx))}
+
+def _candidate_triangles(V, T, points, k: int, sample_mm: float):
+    """Pairs ``(point index, triangle index)``: the triangles of the ``k`` samples nearest each point,
+    the triangles sampled on a barycentric grid no coarser than ``sample_mm`` (long slivers too)."""
+    from scipy.spatial import cKDTree
+
+    edges = np.stack([np.linalg.norm(V[T[:, a]] - V[T[:, b]], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], 1)
+    n_div = np.clip(np.ceil(edges.max(1) / sample_mm), 1, 8).astype(int)
+    samples, owner = [], []
+    for n in np.unique(n_div):
+        sel = np.flatnonzero(n_div == n)
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = (i + j) <= n
+        bary = np.c_[i[keep], j[keep], n - i[keep] - j[keep]] / n                  # (S, 3)
+        pts = np.einsum("sk,tkd->tsd", bary, V[T[sel]])                            # (t, S, 3)
+        samples.append(pts.reshape(-1, 3))
+        owner.append(np.repeat(sel, len(bary)))
+    samples, owner = np.concatenate(samples), np.concatenate(owner)
+    _, nn = cKDTree(samples).query(points, k=k)
+    cand = np.sort(owner[nn.reshape(len(points), -1)], axis=1)
+    fresh = np.c_[np.ones(len(points), bool), cand[:, 1:] != cand[:, :-1]]       # each triangle once per point
+    rows = np.repeat(np.arange(len(points)), cand.shape[1])[fresh.ravel()]
+    return rows, cand.ravel()[fresh.ravel()]
+
+
+@dataclass
+class Correspondence:
+    transport: object              # scipy.sparse (Vt, Va): target displacement = transport @ actor displacement
+    fitted: np.ndarray             # (Va, 3) the actor's head fitted onto the target (target frame, mm)
+    distance_mm: np.ndarray        # (Vt,) each target vertex to the fitted actor's surface
+    lower_weight: np.ndarray       # (Vt,) 0 upper face .. 1 lower face, at each target vertex's actor point
+    fit_report: dict = field(default_factory=dict)
+
+
+def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: float = REACH_MM,
+               candidates: int = 12, exclude_groups=()) -> Correspondence:
+    """Fit ``actor`` onto ``target``'s surface and tie every target vertex to the nearest point of the
+    fitted actor's triangles (among those around its ``candidates`` nearest fitted vertices). A target
+    vertex further than ``reach_mm`` fades out linearly (to no motion at twice the reach)."""
+    import scipy.sparse as sp
+    from scipy.spatial import cKDTree
+
+    check_landmarks(actor, "actor's head")
+    check_landmarks(target, "target")
+    lt = target.landmarks()
+    fit = fit_head(actor, target.vertices, target.triangles(), {n: target.vertices[i] for n, i in lt.items()},
+                   rounds=rounds, exclude_groups=exclude_groups)
+    Vf = fit.vertices
+    T = actor.triangles()
+    rows, tris = _candidate_triangles(Vf, T, target.vertices, candidates, sample_mm=1.5 * fit.scale)
+    P = target.vertices
+    bary, dist = _closest_on_triangles(P[rows], *(Vf[T[tris, j]] for j in range(3)))
+    # where two surfaces touch (the closed lips, a lid on the eyeball) the nearest point can lie on the
+    # wrong one: a triangle facing away from the target vertex's normal costs extra
+    tn = np.cross(Vf[T[:, 1]] - Vf[T[:, 0]], Vf[T[:, 2]] - Vf[T[:, 0]])
+    tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
+    cost = dist + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[tris], target.vertex_normals()[rows]))
+    best_cost = np.full(len(P), np.inf)
+    np.minimum.at(best_cost, rows, cost)
+    pick = np.flatnonzero(cost <= best_cost[rows])
+    best = np.full(len(P), np.inf)
+    best[rows[pick]] = dist[pick]
+    pick = pick[np.unique(rows[pick], return_index=True)[1]]            # one triangle per target vertex
+    r, tri, w = rows[pick], tris[pick], bary[pick]
+    fade = np.clip(2.0 - best / (reach_mm * fit.scale), 0.0, 1.0)
+    transport = sp.csr_matrix(((w * fade[r, None]).ravel(), (np.repeat(r, 3), T[tri].ravel())),
+                              shape=(len(P), len(Vf)))
+    lower = transport @ lower_face_weight(actor, actor.vertices)
+    lower = np.where(fade > 0, lower / np.maximum(fade, 1e-12), lower)
+    return Correspondence(transport=transport, fitted=Vf, distance_mm=best, lower_weight=np.clip(lower, 0, 1),
+                          fit_report={"scale": fit.scale, "landmark_rms_mm": fit.landmark_rms_mm,
+                                      "residual_rms_mm": fit.residual_rms_mm, "residual_max_mm": fit.residual_max_mm,
+                                      "target_vertices_within_reach": int((best <= reach_mm * fit.scale).sum()),
+                                      "target_vertices": int(len(P))})
+
+
+def actor_motion(head: HeadModel, shape_keys: dict | None, binding: Binding, rate: float,
+                 settings: RigSettings | None = None) -> tuple[np.ndarray, dict]:
+    """The actor head's dense motion ``(F, Va, 3)`` (step 1 of the module text) and its parts:
+    ``weights`` (the ARKit prior's, or None), ``blink``."""
+    settings = settings or RigSettings()
+    F = binding.displacements.shape[0]
+    prior = np.zeros((F, len(head.vertices), 3))
+    parts = {"weights": None, "names": [], "prior_residual_mm": None}
+    arkit = {}
+    if shape_keys:
+        try:
+            names, basis = arkit_basis(shape_keys, binding.vertices)
+            arkit = {"names": names, "basis": basis}
+        except InputError:
+            arkit = {}
+    if arkit:
+        solve = solve_weights(arkit["basis"], binding.displacements, arkit["names"])
+        by_lower = {k.lower(): k for k in shape_keys}
+        S = np.stack([np.asarray(shape_keys[by_lower[n.lower()]], float) for n in solve.names])   # (K, Va, 3)
+        prior = (solve.weights @ S.reshape(len(S), -1)).reshape(F, -1, 3)              # one BLAS product
+        parts.update(weights=solve.weights, names=solve.names, prior_residual_mm=solve.residual_mm)
+        if any(n.lower().startswith("eyeblink") for n in solve.names):
+            settings = replace(settings, blinks=False)        # the prior closes the lids as the actor's do
+    rig = FaceRig(head, binding.vertices, settings)
+    D, rig_parts = rig.deform(binding.displacements - prior[:, binding.vertices], fps=rate, with_parts=True)
+    parts.update(jaw_angle=rig_parts["jaw_angle"], blink=rig_parts["blink"])
+    return prior + D, parts
+
+
+def transfer_displacements(actor: HeadModel, target: HeadModel, corr: Correspondence, motion,
+                           scales: dict, dtype=np.float32) -> np.ndarray:
+    """The actor's motion ``(F, Va, 3)`` carried onto the target ``(F, Vt, 3)``: transported by the
+    correspondence, scaled per axis in the face's axes (upper and lower face blended), turned into
+    the target's axes."""
+    A, _ = face_frame(actor)
+    B, _ = face_frame(target)
+    M = np.asarray(motion)
+    F, Va, _ = M.shape
+    # actor axes, vertex-major (Va, F * 3): the transport is one sparse product over every frame
+    local = np.ascontiguousarray((M.reshape(-1, 3) @ A.T).reshape(F, Va, 3).transpose(1, 0, 2), dtype=dtype)
+    moved = (corr.transport.astype(dtype) @ local.reshape(Va, F * 3)).reshape(-1, F, 3)       # (Vt, F, 3)
+    up, low = np.asarray(scales["upper"], float), np.asarray(scales["lower"], float)
+    # the per-vertex scale blends two fixed maps (upper, lower face: scale per axis, then the target's
+    # axes), so each is one (n, 3) x (3, 3) BLAS product over a block of frames
+    w = corr.lower_weight.astype(dtype)[:, None, None]
+    T_up, T_low = (up[:, None] * B).astype(dtype), (low[:, None] * B).astype(dtype)
+    Vt = moved.shape[0]
+    out = np.empty((F, Vt, 3), dtype)
+    for f0 in range(0, F, 128):
+        blk = moved[:, f0:f0 + 128]
+        n = blk.shape[1]
+        flat = blk.reshape(-1, 3)
+        mixed = (flat @ T_up).reshape(Vt, n, 3) * (1 - w) + (flat @ T_low).reshape(Vt, n, 3) * w
+        out[f0:f0 + n] = mixed.transpose(1, 0, 2)
+    return out
+
+
+@dataclass
+class Transfer:
+    displacements: np.ndarray      # (F, Vt, 3) target mm, target frame
+    binding: Binding
+    correspondence: Correspondence
+    scales: dict
+    parts: dict
+
+    def report(self) -> dict:
+        c = self.correspondence
+        w = self.parts.get("weights")
+        out = {"region_scales": {"upper": self.scales["upper"], "lower": self.scales["lower"],
+                                 "axes": ["lateral", "down", "forward"]},
+               "feature_distances_mm": self.scales["feature_distances_mm"],
+               "correspondence": c.fit_report,
+               "binding": {"markers": len(self.binding.labels), "registration": self.binding.registration,
+                           "landmark_rms_mm": self.binding.landmark_rms_mm},
+               "lids": "actor's eyeBlink weights" if w is not None and any(
+                   n.lower().startswith("eyeblink") for n in self.parts["names"]) else "random blinks (face rig)"}
+        if self.parts.get("prior_residual_mm") is not None:
+            r = self.parts["prior_residual_mm"]
+            out["residual_mm"] = {"rms": float(np.sqrt(np.mean(r ** 2))), "max": float(r.max()),
+                                  "per_frame": np.round(r, 4).tolist()}
+        return out
+
+
+def transfer_take(actor: HeadModel, shape_keys: dict | None, target: HeadModel, labels, points, rate: float, *,
+                  neutral_frame: int = 0, head_pose=None, marker_map: dict | None = None, unseen: str = "error",
+                  settings: RigSettings | None = None, progress=None) -> Transfer:
+    """The whole transfer (module text): bind, the actor's dense motion, correspondence, scaling."""
+    check_landmarks(target, "target")
+    if progress:
+        progress(0.05, "binding")
+    binding = bind_take(actor, labels, points, neutral_frame=neutral_frame, head_pose=head_pose,
+                        marker_map=marker_map, unseen=unseen)
+    if progress:
+        progress(0.2, "actor motion")
+    motion, parts = actor_motion(actor, shape_keys, binding, rate, settings)
+    if progress:
+        progress(0.45, "correspondence")
+    corr = correspond(actor, target)
+    scales = region_scales(actor, target)
+    if progress:
+        progress(0.6, "transfer")
+    D = transfer_displacements(actor, target, corr, motion, scales)
+    return Transfer(D, binding, corr, scales, parts)
