@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cat requirements.txt requirements-dev.txt pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench sample head rig-clip stress-clips normal-clips extension contact-sheet clean venv
+.PHONY: demo test bench sample head character rig-clip stress-clips normal-clips extension contact-sheet clean venv
 
 venv: $(STAMP)
 
@@ -43,6 +43,10 @@ clean:
 
 head: $(STAMP)
 	$(PY) sample_scenes/make_generic_head.py
+
+# The demo's second character (retarget --method transfer): MakeHuman's base mesh reshaped, landmarks only.
+character: $(STAMP)
+	$(PY) sample_scenes/make_character.py
 
 contact-sheet: $(STAMP)
 	$(PY) sample_scenes/make_contact_sheet.py

@@ -18,6 +18,7 @@ Writes (atomically) into the output folder:
 * ``batch.json`` -- `mirrorcap batch` of 4 sample takes with 1 and 2 workers;
 * ``stabilize.json`` -- `mirrorcap stabilize` on synthetic 23-marker takes (accuracy over 20 noise draws, speed);
 * ``arkit.json`` -- ARKit-52 weights from a 1,000-frame, 150-marker take (accuracy, solve time);
+* ``transfer.json`` -- `mirrorcap retarget --method transfer` of 1,000 frames onto an 18k-vertex character;
 * ``summary.md`` -- the tables quoted in the README (a skipped part reuses its last JSON).
 """
 
@@ -38,7 +39,8 @@ from mirrorcap.core.common.files import write_files_atomically
 
 from .animation import animation_summary, run_animation_benchmark
 from .batch import batch_summary, run_batch_benchmark
-from .takes import arkit_summary, run_arkit_benchmark, run_stabilize_benchmark, stabilize_summary
+from .takes import (arkit_summary, run_arkit_benchmark, run_stabilize_benchmark, run_transfer_benchmark,
+                    stabilize_summary, transfer_summary)
 from .extraction import run_extraction_benchmark
 from .tracking import run_stress_clip_benchmark, run_track_command_benchmark, run_tracking_benchmark
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
@@ -309,6 +311,8 @@ def main(argv=None) -> int:
                             run_stabilize_benchmark)
     arkit = measure_or_reuse(args.skip_takes, "arkit.json", "ARKit-52 solve: 1,000 frames, 150 markers ...",
                              run_arkit_benchmark)
+    transfer = measure_or_reuse(args.skip_takes, "transfer.json", "retarget --method transfer: 1,000 frames ...",
+                                run_transfer_benchmark)
     summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
     if stress:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(stress_summary(stress)) + "\n"
@@ -320,6 +324,8 @@ def main(argv=None) -> int:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(stabilize_summary(stab)) + "\n"
     if arkit is not None:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(arkit_summary(arkit)) + "\n"
+    if transfer is not None:
+        summary = summary.rstrip("\n") + "\n\n" + "\n".join(transfer_summary(transfer)) + "\n"
     files[out / "summary.md"] = summary
     write_files_atomically(files)
     print(summary)

@@ -5,6 +5,7 @@ rigid layouts, and the speed of reading and stabilising a long take."""
 from __future__ import annotations
 
 import tempfile
+import json
 import time
 from pathlib import Path
 
@@ -109,3 +110,62 @@ def arkit_summary(res: dict) -> list:
             f"Weights RMS error {res['weight_rms']:.4f}, max {res['weight_max']:.3f}; fit residual "
             f"{res['residual_mm_rms']:.3f} mm RMS; bind {res['bind_s']:.2f} s, solve {res['solve_s']:.2f} s "
             f"({res['iterations']} ADMM iterations)."]
+
+
+def run_transfer_benchmark() -> dict:
+    """``mirrorcap retarget --method transfer`` of a 1,000-frame, 150-marker take onto an 18,289-vertex
+    character (the generic head subdivided, 12 % wider and shorter, landmarks only), run as a user runs
+    it (a fresh process, the .blend written), in frame keys and in 8 PCA keys."""
+    import subprocess
+    import sys
+    import tempfile
+
+    from mirrorcap.core.face.head import HeadModel
+    from mirrorcap.core.face.headfit import subdivide
+    from mirrorcap.core.face.headio import load_head_npz, save_head_npz
+    from mirrorcap.core.take.c3d import write_c3d
+    from mirrorcap.synthetic.headsim import arkit_take
+
+    root = Path(__file__).resolve().parent.parent
+    head, keys = load_head_npz(root / "sample_scenes" / "generic_head" / "head.npz", with_shape_keys=True)
+    F = 1000
+    out = {"take_frames": F, "markers": 150}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        labels, pts, _ = arkit_take(head, keys, frames=F, seed=21)
+        write_c3d(tmp / "take.c3d", labels, pts, 30.0)
+        V2, T2 = subdivide(head.vertices, head.triangles(), 1)
+        pad = len(V2) - len(head.vertices)
+        char = HeadModel(vertices=V2 * [1.12, 0.88, 1.0], polygons=T2.ravel(), polygon_sizes=np.full(len(T2), 3),
+                         groups={g: np.r_[w, np.zeros(pad)] for g, w in head.groups.items() if g.startswith("lm_")},
+                         name="Character")
+        save_head_npz(tmp / "character.npz", char)
+        subprocess.run([sys.executable, "-c", "from mirrorcap.core.face.headio import load_head_npz\n"
+                        "from mirrorcap.addon.common.headio import write_head_blend\n"
+                        f"write_head_blend(load_head_npz({str(tmp / 'character.npz')!r}), {str(tmp / 'target.blend')!r})"],
+                       check=True, capture_output=True)
+        out["vertices"] = int(len(char.vertices))
+        for mode in ("frames", "pca"):
+            t0 = time.perf_counter()
+            res = subprocess.run([sys.executable, "-m", "mirrorcap", "retarget", str(tmp / "take.c3d"), "--head",
+                                  str(root / "sample_scenes" / "generic_head" / "head.blend"), "--target",
+                                  str(tmp / "target.blend"), "-o", str(tmp / f"out_{mode}.blend"), "--method", "transfer",
+                                  "--mode", mode, "--report", str(tmp / f"r_{mode}.json"), "-q"],
+                                 capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            if res.returncode != 0:
+                raise RuntimeError(res.stdout + res.stderr)
+            rep = json.loads((tmp / f"r_{mode}.json").read_text())
+            out[mode] = {"wall_s": wall, **rep["timings_s"],
+                         "blend_mb": (tmp / f"out_{mode}.blend").stat().st_size / 1e6}
+    return out
+
+
+def transfer_summary(res: dict) -> list:
+    def row(mode):
+        r = res[mode]
+        return (f"| `--mode {mode}` | {r['wall_s']:.1f} s | {r['transfer_s']:.1f} s | {r['keys_s']:.1f} s | "
+                f"{r['blend_mb']:.0f} MB |")
+    return [f"### `mirrorcap retarget --method transfer` ({res['take_frames']} frames, {res['markers']} markers, "
+            f"{res['vertices']}-vertex character, a fresh process as a user runs it)", "",
+            "| keys | wall | transfer | keys | OUT.blend |", "| --- | --- | --- | --- | --- |", row("frames"), row("pca")]

@@ -11,7 +11,12 @@ scan of the same face. The demo runs the product end to end, as a user would:
                no landmark labels);
 4. ``bake``    the face rig on every frame -> shape keys; the baked displacements are
                compared with the performance the clip was rendered from;
-5. outputs     ``demo.blend`` (fitted head with its shape keys, the take as empties),
+5. ``retarget`` the take's motion transferred onto a second character
+               (``sample_scenes/character``: other proportions and topology, landmarks only;
+               :func:`core.retarget.transfer.transfer_take`), compared with that character's own
+               expressions under the same performance;
+6. outputs     ``demo.blend`` (fitted head and character with their shape keys, side by side; the
+               take as empties),
                ``fitted_head.blend`` (the fitted head alone, for baking more takes),
                ``preview.mp4`` (Cycles, CPU), ``report.html``, ``demo.json``; a one-screen
                summary on stdout.
@@ -32,7 +37,9 @@ from ..core.common.files import write_files_atomically
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "sample_scenes" / "rig_clip"
-PREVIEW_SIZE = (480, 360)
+CHARACTER = ROOT / "sample_scenes" / "character" / "character.npz"
+PREVIEW_SIZE = (640, 360)
+CHARACTER_OFFSET_M = 0.2        # the character stands this far to the actor's left in the scene (Blender x)
 
 
 def _step(name, timings, fn, *args, **kw):
@@ -42,8 +49,9 @@ def _step(name, timings, fn, *args, **kw):
     return out
 
 
-def _render_preview(obj, frames: int, fps: float, path: Path) -> None:
-    """Render the baked head from the front to an H.264 file (Cycles, CPU, a few samples)."""
+def _render_preview(objects, frames: int, fps: float, path: Path) -> None:
+    """Render the baked heads (actor and character, side by side) from the front to an H.264 file
+    (Cycles, CPU, a few samples)."""
     from ..addon.common.frames import core_to_blender
     from ..addon.common.video_out import h264_output
 
@@ -69,10 +77,13 @@ def _render_preview(obj, frames: int, fps: float, path: Path) -> None:
     if bsdf is not None:
         bsdf.inputs["Base Color"].default_value = (0.62, 0.47, 0.42, 1.0)
         bsdf.inputs["Roughness"].default_value = 0.6
-    obj.data.materials.append(skin)
-    co = np.empty(len(obj.data.vertices) * 3, np.float32)
-    obj.data.vertices.foreach_get("co", co)
-    centre_b = np.asarray(obj.matrix_world) @ np.r_[co.reshape(-1, 3).mean(0), 1.0]
+    centres = []
+    for obj in objects:
+        obj.data.materials.append(skin)
+        co = np.empty(len(obj.data.vertices) * 3, np.float32)
+        obj.data.vertices.foreach_get("co", co)
+        centres.append(np.asarray(obj.matrix_world) @ np.r_[co.reshape(-1, 3).mean(0), 1.0])
+    centre_b = np.mean(centres, axis=0)
     cam_data = bpy.data.cameras.new("preview_camera")
     cam_data.lens = 50.0
     cam = bpy.data.objects.new("preview_camera", cam_data)
@@ -93,6 +104,7 @@ def _render_preview(obj, frames: int, fps: float, path: Path) -> None:
 
 
 def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool = True) -> int:
+    from ..addon.common.frames import core_to_blender
     from ..addon.common.shape_keys import bake_displacements
     from ..addon.common.headio import GENERIC_HEAD, new_head_object, save_blend_atomically
     from ..addon.common.take_io import import_take
@@ -103,6 +115,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     from ..core.face.headfit import fit_head
     from ..core.face.headio import load_head_npz
     from ..core.face.scanio import read_landmarks, read_scan
+    from ..core.retarget.transfer import transfer_take
     from ..core.geometry.camera import Camera
     from ..core.take.c3d import read_c3d
     from ..core.track.pipeline import run_track
@@ -131,7 +144,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     fps = float(take["rate"])
 
     # 2. fit the generic head to the scan
-    say("2/5 fit        generic head -> sample scan")
+    say("2/6 fit        generic head -> sample scan")
     head, keys = load_head_npz(GENERIC_HEAD, with_shape_keys=True)
     scan_V, scan_T = read_scan(sample / "scan.ply")
     fit = _step("fit", timings, fit_head, head, scan_V, scan_T, read_landmarks(sample / "scan_landmarks.json"))
@@ -143,8 +156,8 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     fit_err = np.linalg.norm(fit.vertices - true_scan, axis=1)[face]
 
     # 3. bind (with the tracker's head pose) and 4. rig
-    say("3/5 bind       take -> fitted head (skin-surface registration)")
-    say("4/5 rig+bake   face rig on every frame -> shape keys")
+    say("3/6 bind       take -> fitted head (skin-surface registration)")
+    say("4/6 rig+bake   face rig on every frame -> shape keys")
     pose = head_pose_from_report(report_path, take["points"].shape[0])
     anim = animate_take(fitted, take["labels"], take["points"], fps, head_pose=pose, unseen="conjecture",
                         settings=RigSettings(blinks=True))
@@ -169,7 +182,16 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
         per_region.append((g[7:], int(np.isin(binding.vertices, m).sum()), float(np.sqrt(np.mean(e ** 2))),
                            float(np.sqrt(np.mean(np.sum(true_disp[:, m] ** 2, axis=2))))))
 
-    # 5. Blender scene, preview, report
+    # 5. retarget: the take's motion onto the second character (landmarks only, no shape keys)
+    say("5/6 retarget   take -> second character (motion transfer)")
+    character, character_keys = load_head_npz(CHARACTER, with_shape_keys=True)
+    transfer = _step("retarget", timings, transfer_take, fitted, keys, character, take["labels"], take["points"],
+                     fps, head_pose=pose, unseen="conjecture")
+    own, _ = performance(character, character_keys, D.shape[0], fps, seed=int(truth["performance_seed"]))
+    moving = np.linalg.norm(own, axis=2) > 1.0
+    transfer_err = np.linalg.norm(transfer.displacements - own, axis=2)[moving]
+
+    # 6. Blender scene, preview, report
     t0 = time.perf_counter()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     # the generic head's 52 ARKit expressions ride along (their offsets, as Fit Head keeps them), so
@@ -177,12 +199,17 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     obj = new_head_object(fitted, keys, name="subject_head")
     save_blend_atomically(out_dir / "fitted_head.blend")        # for `mirrorcap bake/batch` of more takes
     bake = bake_displacements(obj, fitted.vertices, D, "frames")
+    char_obj = new_head_object(character, name="Character")
+    # beside the actor: the character's centre at the actor's, moved along Blender x
+    char_obj.location = core_to_blender(fitted.vertices.mean(0)) - core_to_blender(character.vertices.mean(0)) \
+        + np.array([CHARACTER_OFFSET_M, 0.0, 0.0])
+    bake_displacements(char_obj, character.vertices, transfer.displacements, "frames")
     bpy.context.scene.render.fps = max(1, int(round(fps)))
     timings["bake"] = time.perf_counter() - t0
     if preview:
-        say("5/5 preview    Cycles (CPU) render of the baked head")
+        say("6/6 preview    Cycles (CPU) render of the baked head and the character, side by side")
         tmp_video = out_dir / ".preview.tmp.mp4"
-        _step("preview", timings, _render_preview, obj, D.shape[0], fps, tmp_video)
+        _step("preview", timings, _render_preview, [obj, char_obj], D.shape[0], fps, tmp_video)
     import_take(bpy.context, take_path, name="sample")
     t0 = time.perf_counter()
     save_blend_atomically(out_dir / "demo.blend")
@@ -211,6 +238,11 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
                       "shape_keys": bake["frames"],
                       "per_region": [{"region": r, "markers": n, "error_rms_mm": e, "true_motion_rms_mm": tm}
                                      for r, n, e, tm in per_region]},
+        "retarget": {"character_vertices": int(len(character.vertices)),
+                     "region_scales": transfer.report()["region_scales"],
+                     "moving_vertex_error_mean_mm": float(transfer_err.mean()),
+                     "moving_vertex_error_p95_mm": float(np.percentile(transfer_err, 95)),
+                     "own_motion_mean_mm": float(np.linalg.norm(own, axis=2)[moving].mean())},
         "timings_s": timings,
     }
 
@@ -262,9 +294,12 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
         ("bind: registration residual", f"{binding.landmark_rms_mm:.2f} mm ({binding.registration})"),
         ("animation: baked vs true displacement", f"{summary['animation']['displacement_error_rms_mm']:.2f} mm RMS "
                                                   f"(true motion {summary['animation']['true_displacement_rms_mm']:.2f} mm RMS)"),
+        ("retarget: character's moving vertices vs its own expression",
+         f"{summary['retarget']['moving_vertex_error_mean_mm']:.2f} mm mean (their motion "
+         f"{summary['retarget']['own_motion_mean_mm']:.2f} mm mean)"),
     ]
     time_rows = [(k, f"{v:.2f} s") for k, v in timings.items()]
-    page = html_page("MirrorCap demo: sample rig clip -> baked head",
+    page = html_page("MirrorCap demo: sample rig clip -> baked head -> second character",
                      [("Figures", table(figures, ["figure", "value"]))] + plots
                      + [("Timings", table(time_rows, ["step", "seconds"]))],
                      video="preview.mp4" if preview else None)
@@ -287,6 +322,8 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     say(f"  bind        {binding.registration} registration, {binding.landmark_rms_mm:.2f} mm RMS")
     say(f"  animation   baked face motion within {summary['animation']['displacement_error_rms_mm']:.2f} mm RMS of the "
         f"rendered performance (its motion: {summary['animation']['true_displacement_rms_mm']:.2f} mm RMS)")
+    say(f"  retarget    onto a second character ({len(character.vertices)} vertices, landmarks only): its moving "
+        f"vertices within {summary['retarget']['moving_vertex_error_mean_mm']:.2f} mm mean of its own expression")
     say(f"  time        {timings['total']:.1f} s (" + ", ".join(f"{k} {v:.1f}" for k, v in timings.items()
                                                            if k != "total") + ")")
     say(f"  outputs     {out_dir / 'demo.blend'}, {out_dir / 'report.html'}"

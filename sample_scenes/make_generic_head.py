@@ -153,8 +153,9 @@ def build(assets) -> tuple[HeadModel, dict, dict]:
     chin_travel = np.linalg.norm(units["jawOpen"][front], axis=1).max()
     rides_jaw = np.linalg.norm(units["jawOpen"], axis=1) > 0.4 * chin_travel
     lips = front[np.abs(V[front, 1] - y_corners) < 14]
-    above = lips[~rides_jaw[lips] & (V[lips, 1] < y_corners + 8)]
-    below = lips[rides_jaw[lips]]
+    y_slit_mid = V[lips[~rides_jaw[lips] & (V[lips, 1] < y_corners + 8)], 1].max()   # the upper lip's lowest point
+    above = lips[~rides_jaw[lips] & (V[lips, 1] > y_slit_mid - 8)]
+    below = lips[rides_jaw[lips] & (V[lips, 1] < y_slit_mid + 10)]
     lm["upper_lip"] = above[np.argmin(V[above, 2])]
     lm["lower_lip"] = below[np.argmin(V[below, 2])]
     y_slit = y_corners

@@ -12,7 +12,9 @@ needs no shape keys and no MirrorCap groups -- only ``lm_<name>`` landmarks
 2. **Correspondence** (:func:`correspond`). The actor's head is fitted onto the target's surface by
    the scan-fit path (:func:`..face.headfit.fit_head`: landmark similarity, landmark RBF of eq.
    7.1-7.2, then projection rounds). Each target vertex takes the nearest point of the fitted
-   actor's triangles; its barycentric weights form the sparse transport matrix.
+   actor's triangles; its barycentric weights form the sparse transport matrix. Across the mouth
+   slit and the upper lids, where the motion jumps, each side is voted over the target's own mesh
+   so a vertex near a slit does not take the other side's motion.
 3. **Scaling by feature distances** (seed 001, section 4). Displacements are expressed in the face's
    own axes (lateral, down, forward) and scaled per axis by the target-to-actor ratio of feature
    distances: for the upper face the distance between the eyes and from the eye line to the nose
@@ -32,8 +34,8 @@ import numpy as np
 
 from ..common.errors import InputError
 from ..face.bind import Binding, bind_take
-from ..face.facerig import FaceRig, RigSettings
-from ..face.head import LANDMARKS, HeadModel
+from ..face.facerig import JAW_RIDING, FaceRig, RigSettings
+from ..face.head import LANDMARKS, NOT_SKIN, REGIONS, HeadModel
 from ..face.headfit import fit_head
 from .arkit import arkit_basis, solve_weights
 
@@ -178,6 +180,49 @@ def _candidate_triangles(V, T, points, k: int, sample_mm: float):
     return rows, cand.ravel()[fresh.ravel()]
 
 
+SIDE_VOTE_RINGS = 3      # mesh rings over which the side of a slit (lips, lids) is voted
+
+
+def motion_classes(head: HeadModel) -> np.ndarray:
+    """Per vertex, which side of a slit in the motion it is on: 0 the rest, 1 riding the jaw (the
+    regions below the mouth slit, the lower teeth and inner lip), 2 and 3 the left and right upper lids."""
+    lab = head.region_labels()
+    out = np.zeros(len(head.vertices), np.int64)
+    out[np.isin(lab, [REGIONS.index(r) for r in JAW_RIDING])] = 1
+    out[head.members("teeth_lower")] = 1
+    out[head.members("inner_lip_lower")] = 1
+    out[head.members("eyelid_upper_l")] = 2
+    out[head.members("eyelid_upper_r")] = 3
+    return out
+
+
+def _cheapest(rows, cost, n: int) -> np.ndarray:
+    """Per point ``0..n-1``, the index (into ``rows``/``cost``) of its cheapest candidate."""
+    order = np.lexsort((cost, rows))
+    first = np.unique(rows[order], return_index=True)[1]
+    out = np.full(n, -1)
+    out[rows[order[first]]] = order[first]
+    return out
+
+
+def _vote_on_mesh(head: HeadModel, labels, rings: int) -> np.ndarray:
+    """``labels (V,)`` after ``rings`` rounds of each vertex taking the most common label of itself and
+    its mesh neighbours (a tie keeps its own)."""
+    import scipy.sparse as sp
+
+    e = head.edges()
+    n = len(head.vertices)
+    A = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    lab = np.asarray(labels, np.int64)
+    k = int(lab.max(initial=0)) + 1
+    for _ in range(rings):
+        onehot = np.zeros((n, k))
+        onehot[np.arange(n), lab] = 1.0
+        votes = A @ onehot + 1.5 * onehot          # its own label counts 1.5: ties keep it
+        lab = np.argmax(votes, axis=1)
+    return lab
+
+
 @dataclass
 class Correspondence:
     transport: object              # scipy.sparse (Vt, Va): target displacement = transport @ actor displacement
@@ -188,12 +233,14 @@ class Correspondence:
 
 
 def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: float = REACH_MM,
-               candidates: int = 12, exclude_groups=()) -> Correspondence:
+               candidates: int = 12, exclude_groups=NOT_SKIN) -> Correspondence:
     """Fit ``actor`` onto ``target``'s surface and tie every target vertex to the nearest point of the
-    fitted actor's triangles (among those around its ``candidates`` nearest fitted vertices). A target
-    vertex further than ``reach_mm`` fades out linearly (to no motion at twice the reach)."""
+    fitted actor's triangles (among those of its ``candidates`` nearest triangle samples; a triangle
+    facing away costs :data:`FACING_PENALTY_MM` per unit of ``1 - cos``). Across a slit in the motion
+    (:func:`motion_classes`) the side is voted over the target's mesh and a vertex that landed on the
+    other side takes its nearest triangle on its own. A target vertex further than ``reach_mm`` fades
+    out linearly (to no motion at twice the reach)."""
     import scipy.sparse as sp
-    from scipy.spatial import cKDTree
 
     check_landmarks(actor, "actor's head")
     check_landmarks(target, "target")
@@ -210,13 +257,28 @@ def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: f
     tn = np.cross(Vf[T[:, 1]] - Vf[T[:, 0]], Vf[T[:, 2]] - Vf[T[:, 0]])
     tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
     cost = dist + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[tris], target.vertex_normals()[rows]))
-    best_cost = np.full(len(P), np.inf)
-    np.minimum.at(best_cost, rows, cost)
-    pick = np.flatnonzero(cost <= best_cost[rows])
-    best = np.full(len(P), np.inf)
-    best[rows[pick]] = dist[pick]
-    pick = pick[np.unique(rows[pick], return_index=True)[1]]            # one triangle per target vertex
-    r, tri, w = rows[pick], tris[pick], bary[pick]
+    pick = _cheapest(rows, cost, len(P))
+    # the lips' slit and the lids' slit: the motion jumps across them, and a target vertex within a few
+    # mm of one can land on the wrong side. Each side is a connected piece of the target's own mesh, so
+    # the side is voted over its neighbours and the vertices that landed on the other side move back
+    tri_class = motion_classes(actor)[T]
+    tri_class = np.where(tri_class[:, 0] == tri_class[:, 1], tri_class[:, 0], tri_class[:, 2])   # majority
+    side = _vote_on_mesh(target, tri_class[tris[pick]], SIDE_VOTE_RINGS)
+    tri, w, best = tris[pick], bary[pick], dist[pick]
+    normals = target.vertex_normals()
+    for c in np.unique(side):
+        move = np.flatnonzero((side == c) & (tri_class[tri] != c))
+        own = np.flatnonzero(tri_class == c)
+        if move.size == 0 or own.size == 0:
+            continue
+        # their nearest triangles on their own side (the first candidates were all across the slit)
+        r2, t2 = _candidate_triangles(Vf, T[own], P[move], candidates, sample_mm=1.5 * fit.scale)
+        t2 = own[t2]
+        b2, d2 = _closest_on_triangles(P[move][r2], *(Vf[T[t2, j]] for j in range(3)))
+        c2 = d2 + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[t2], normals[move][r2]))
+        p2 = _cheapest(r2, c2, move.size)
+        tri[move], w[move], best[move] = t2[p2], b2[p2], d2[p2]
+    r = np.arange(len(P))
     fade = np.clip(2.0 - best / (reach_mm * fit.scale), 0.0, 1.0)
     transport = sp.csr_matrix(((w * fade[r, None]).ravel(), (np.repeat(r, 3), T[tri].ravel())),
                               shape=(len(P), len(Vf)))
