@@ -89,7 +89,7 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     assert res.returncode == 0, res.stdout + res.stderr
     out = json.loads(res.stdout.split("RESULT ", 1)[1])
     assert out["install"] == ["FINISHED"] and out["enabled"]
-    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 18
+    assert out["ops"] == OPERATOR_IDS and len(OPERATOR_IDS) == 20
     assert len(out["panels"]) == 6
     assert out["marker_size"] == 2                   # AddonPreferences.bl_idname is the extension's package
     assert out["head"] == ["FINISHED"] and out["vertices"] == 4608 and out["keys"] == 53

@@ -222,3 +222,132 @@ def test_markers_designated_in_seeds_keep_their_names_and_their_dots(tmp_path, c
                                "--seeds", seeds, "-o", tmp_path / "bad.c3d"], capsys)
         assert code == 2 and message in err and err.count("\n") == 1, (message, err)
         assert not (tmp_path / "bad.c3d").exists()
+
+
+def test_wrong_designations_are_fixed_in_the_clip_and_re_solve_repairs_the_take(tmp_path, capsys):
+    """#21: with 10 % of SEEDS.csv wrong (five designations' mirror points on another dot), the take
+    loses those designations (each is tracked under an automatic label, or not at all). Written to the
+    clip as tracks, the five are fixed as a user fixes them in the Movie Clip Editor (their tracks
+    renamed to the designation), a stretch of another track is muted, and Re-solve re-estimates the
+    mirrors from the tuned tracks and recomputes the take: every designation is back, on its own dot."""
+    import subprocess
+    import sys
+
+    clip = CLIPS["light"]
+    text, picked = _seeds_from_truth(clip, every=2, limit=50)
+    truth, camera = np.load(clip / "truth.npz"), Camera.load(clip / "camera.json")
+    views = _projections(truth, camera, 0)
+    wrong = picked[:: len(picked) // 5][:5]
+    rows = []
+    for row in text.strip().splitlines()[1:]:
+        name, view, x, y = row.split(",")
+        m = int(name[3:])
+        if m in wrong and view.startswith("mirror"):        # the nearest undesignated marker's dot in that mirror
+            k = int(view[-1])
+            d = np.linalg.norm(views[1 + k] - views[1 + k][m], axis=1)
+            d[picked], d[~truth["visible"][0, 1 + k]] = np.inf, np.inf
+            x, y = views[1 + k][int(np.argmin(d))]
+            row = f"{name},{view},{x:.2f},{y:.2f}"
+        rows.append(row)
+    (tmp_path / "seeds.csv").write_text("id,view,x,y\n" + "\n".join(rows) + "\n")
+    assert len(picked) >= 40 and len(wrong) == 5
+    take = tmp_path / "take.c3d"
+    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--light", "normal",
+                           "--seeds", tmp_path / "seeds.csv", "-o", take, "--report", tmp_path / "take_report.json",
+                           "-q"], capsys)
+    assert code == 0, err
+    data = read_c3d(take)
+    s = score_take(data["points"], truth["points"], camera, conjectured=data["conjectured"])
+    lost = [f"dot{m:03d}" for m in picked if f"dot{m:03d}" not in data["labels"]]
+    assert lost == [f"dot{m:03d}" for m in wrong], lost        # the wrong designations did not hold, the rest did
+    assert "5 designation(s) of the seeds file did not hold" in json.loads((tmp_path / "take_report.json").read_text())[
+        "warnings"][0]
+    # the user's fix for each: rename the track that follows that marker's dot; where no track does, track
+    # the dot anew (here: the extractor's dot nearest its true image in each view and frame, as Blender's
+    # tracker would follow it from a click)
+    from scipy.spatial import cKDTree
+
+    fixes, new_tracks = {}, {}
+    extract = marker_extractor(ColorClasses.default("normal"), ExtractionSettings(light="normal"))
+    frames = [fr for _, fr in open_source(clip / "clip.mp4").frames(0, 120, 1)]
+    for m in wrong:
+        hits = [data["labels"][i] for i in np.flatnonzero(s["ids"] == m)]
+        if hits:
+            fixes[f"dot{m:03d}"] = hits[0]
+            continue
+        rows = {}
+        for f, img in enumerate(frames):
+            det = extract(img)
+            d, j = cKDTree(np.c_[det.x, det.y]).query(np.stack([v[m] for v in _projections(truth, camera, f)]))
+            for v in np.flatnonzero((d < 1.5) & truth["visible"][f, :, m]):
+                rows.setdefault(("direct", "mirror0", "mirror1")[v], []).append([f, float(det.x[j[v]]), float(det.y[j[v]])])
+        new_tracks[f"dot{m:03d}"] = rows
+    # ... and delete a track that jumps between dots (the user sees it leave its dot in the clip)
+    from scipy.spatial import cKDTree as _Tree
+
+    delete = []
+    for i in np.flatnonzero(s["ids"] >= 0):
+        f_ok = np.flatnonzero(np.all(np.isfinite(s["aligned"][:, i]), axis=1) & ~data["conjectured"][:, i])
+        near = [_Tree(truth["points"][f]).query(s["aligned"][f, i])[1] for f in f_ok]
+        if np.any(np.asarray(near) != s["ids"][i]):
+            delete.append(data["labels"][i])
+    (tmp_path / "fixes.json").write_text(json.dumps({"rename": fixes, "track": new_tracks, "delete": delete}))
+    res = subprocess.run([sys.executable, ROOT / "tests" / "blender" / "resolve_ops.py", tmp_path, clip],
+                         capture_output=True, text=True, timeout=900, cwd=ROOT)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    o = json.loads(res.stdout.split("RESULT ", 1)[1])
+    assert o["resolve_first"][0] == "ERROR" and "Take To Clip" in o["resolve_first"][1]
+    assert o["to_clip"] == ["FINISHED"] and o["tracks"] > 2 * len(data["labels"])
+    assert o["resolve_cancel"] == ["CANCELLED"] and o["cancel_unchanged"]
+    assert o["resolve"] == ["FINISHED"]
+    fixed = read_c3d(take)
+    s2 = score_take(fixed["points"], truth["points"], camera)
+    named = {lab: i for i, lab in enumerate(fixed["labels"]) if lab.startswith("dot")}
+    print(f"re-solve: {len(fixes)} of 5 lost designations fixed by renaming, {len(new_tracks)} by tracking anew, "
+          f"{len(delete)} track(s) deleted ({s['identity_switches']} switches before); "
+          f"RMS {s['rms_mm']:.3f} -> "
+          f"{s2['rms_mm']:.3f} mm, switches {s2['identity_switches']}, mirrors moved "
+          f"{o['report']['mirror_change_deg']} deg, {o['report']['rejected_correspondences']} correspondences left out")
+    assert all(name in named and s2["ids"][named[name]] == int(name[3:]) for name in list(fixes) + list(new_tracks))
+    assert sorted(named) == sorted(f"dot{m:03d}" for m in picked)              # every designation is back
+    assert s2["identity_switches"] == 0 and s2["rms_mm"] < 0.5 and max(o["report"]["mirror_change_deg"]) < 0.1
+    assert len(fixes) + len(new_tracks) + len(delete) <= 6                  # five fixes and at most one deletion
+    assert not set(delete) & set(fixed["labels"]) and sorted(o["report"]["markers_without_a_frame"]) == sorted(delete)
+
+
+def test_re_solve_from_tracks_re_estimates_the_mirrors_and_rejects_a_wrong_correspondence():
+    """core.track.resolve: the take from per-view 2D tracks (here the clip's true dots with 0.2 px noise):
+    the mirrors re-estimated, every marker-frame with a direct and a mirror point reconstructed in the
+    earlier take's units; tracks that follow another marker's dot in a mirror are rejected, not
+    reconstructed."""
+    from mirrorcap.core.track.resolve import resolve_tracks
+
+    clip = CLIPS["light"]
+    truth, camera = np.load(clip / "truth.npz"), Camera.load(clip / "camera.json")
+    F, M = truth["points"].shape[:2]
+    rng = np.random.default_rng(0)
+    tracks = np.full((F, M, 3, 2), np.nan)
+    for f in range(F):
+        for v, px in enumerate(_projections(truth, camera, f)):
+            ok = truth["visible"][f, v]
+            tracks[f, ok, v] = px[ok] + rng.normal(0, 0.2, (ok.sum(), 2))
+    previous = [{"normal": truth["mirror_normals"][0].tolist(), "d": float(truth["mirror_d"][0])}]
+    labels = [f"m{i:03d}" for i in range(M)]
+    res = resolve_tracks(labels, tracks, camera, previous)
+    s = score_take(res.points, truth["points"], camera)
+    assert s["rms_mm"] < 0.2 and s["identity_switches"] == 0 and abs(s["scale_to_mm"] - 1) < 0.002
+    both = np.isfinite(tracks[:, :, 0, 0]) & np.isfinite(tracks[:, :, 1:, 0]).any(axis=2)
+    assert np.array_equal(np.isfinite(res.points[..., 0]), both) and res.report["rejected_correspondences"] == 0
+    for k, pl in enumerate(res.planes):
+        assert np.degrees(np.arccos(abs(pl.normal @ truth["mirror_normals"][k]))) < 0.05
+    # five markers' mirror-1 tracks follow the next marker's dot: those correspondences are left out
+    bad = np.array([5, 30, 60, 90, 120])
+    wrong = tracks.copy()
+    wrong[:, bad, 2] = tracks[:, bad + 1, 2]
+    only_m1 = np.isfinite(wrong[:, bad, 2, 0]) & ~np.isfinite(wrong[:, bad, 1, 0]) & np.isfinite(wrong[:, bad, 0, 0])
+    res = resolve_tracks(labels, wrong, camera, previous)
+    s = score_take(res.points, truth["points"], camera)
+    print(f"re-solve from tracks: {res.report['rejected_correspondences']} correspondences rejected, "
+          f"RMS {s['rms_mm']:.3f} mm, max {s['max_mm']:.2f}")
+    assert res.rejected[:, bad].sum() >= 0.9 * only_m1.sum() and only_m1.sum() > 20 and res.report["mirrors_disagree"] > 0
+    assert s["identity_switches"] == 0 and s["max_mm"] < 2.0

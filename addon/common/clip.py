@@ -124,3 +124,82 @@ def selected_track_pixels(clip, frame: int):
                 continue
             pts.append((marker.co[0] * w - 0.5, (1.0 - marker.co[1]) * h - 0.5))
     return np.array(pts, float).reshape(-1, 2)
+
+
+TAKE_TRACKS = "MirrorCap Take"   # the tracking object holding a take's 2D tracks (``<label>.<view>``)
+
+
+def take_to_clip_tracks(clip, labels, points, mirrors, camera, first_frame: int = 0, measured=None,
+                        step: int = 1) -> int:
+    """Write a take as 2D clip tracks the user can fix with Blender's tracking tools: per marker and
+    view, a track ``<label>.<view>`` (views :data:`VIEW_NAMES`) with a marker on every frame where the
+    take measured it (``measured (F, M)``, default every finite point), at its projection through the
+    view (``mirrors``: the take report's planes, in the take's units); take frame ``f`` is video frame
+    ``first_frame + f * step`` (clip frame one more). Replaces the clip's :data:`TAKE_TRACKS` object.
+    Returns the number of tracks."""
+    from ...core.geometry.mirror import reflect_points
+
+    P = np.asarray(points, float)
+    F, M, _ = P.shape
+    ok = np.all(np.isfinite(P), axis=2) if measured is None else np.asarray(measured, bool) & np.all(np.isfinite(P), 2)
+    views = [camera.project(P.reshape(-1, 3)).reshape(F, M, 2)]
+    for m in mirrors:
+        views.append(camera.project(reflect_points(P.reshape(-1, 3), np.asarray(m["normal"], float),
+                                                   float(m["d"]))).reshape(F, M, 2))
+    objects = clip.tracking.objects
+    old = objects.get(TAKE_TRACKS)
+    if old is not None:
+        objects.remove(old)
+    obj = objects.new(TAKE_TRACKS)
+    w, h = clip.size
+    count = 0
+    for v, px in enumerate(views):
+        inside = ok & (px[..., 0] >= 0) & (px[..., 0] < w) & (px[..., 1] >= 0) & (px[..., 1] < h)
+        for m in np.flatnonzero(inside.any(axis=0)):
+            frames = np.flatnonzero(inside[:, m])
+            clip_frames = first_frame + frames * step + 1
+            track = obj.tracks.new(name=f"{labels[m]}.{VIEW_NAMES[v]}", frame=int(clip_frames[0]))
+            co = np.c_[(px[frames, m, 0] + 0.5) / w, 1.0 - (px[frames, m, 1] + 0.5) / h]
+            for f, c in zip(clip_frames[1:], co[1:]):           # no bulk insert for clip markers
+                track.markers.insert_frame(int(f), co=(float(c[0]), float(c[1])))
+            track.markers.find_frame(int(clip_frames[0])).co = (float(co[0, 0]), float(co[0, 1]))
+            track.color = CLASS_COLORS[v % len(CLASS_COLORS)]
+            track.use_custom_color = True
+            count += 1
+    return count
+
+
+def clip_tracks_to_take_tracks(clip, n_frames: int, first_frame: int = 0, step: int = 1):
+    """The :data:`TAKE_TRACKS` tracks back as ``labels, tracks (F, M, 3, 2)`` pixels (NaN where a track
+    has no marker or a muted one), the user's fixes included; tracks not named ``<label>.<view>`` are
+    refused by name."""
+    obj = clip.tracking.objects.get(TAKE_TRACKS)
+    if obj is None or not len(obj.tracks):
+        raise InputError(f"the clip has no {TAKE_TRACKS!r} tracks: write the take to the clip first (Take To Clip)")
+    w, h = clip.size
+    per = {}
+    for track in obj.tracks:
+        label, _, view = track.name.rpartition(".")
+        if not label or view not in VIEW_NAMES:
+            raise InputError(f"track {track.name!r}: take tracks are named <label>.<view> with view one of "
+                             f"{', '.join(VIEW_NAMES)}")
+        n = len(track.markers)
+        if n == 0:
+            continue
+        fr = np.empty(n, np.int32)
+        co = np.empty(2 * n, np.float32)
+        mute = np.empty(n, bool)
+        track.markers.foreach_get("frame", fr)
+        track.markers.foreach_get("co", co)
+        track.markers.foreach_get("mute", mute)
+        off = fr - 1 - first_frame
+        f = off // step
+        keep = ~mute & (off % step == 0) & (f >= 0) & (f < n_frames)
+        co = co.reshape(-1, 2)[keep]
+        per.setdefault(label, {})[VIEW_NAMES.index(view)] = (f[keep], np.c_[co[:, 0] * w - 0.5, (1.0 - co[:, 1]) * h - 0.5])
+    labels = sorted(per)
+    tracks = np.full((n_frames, len(labels), 3, 2), np.nan)
+    for m, label in enumerate(labels):
+        for v, (f, xy) in per[label].items():
+            tracks[f, m, v] = xy
+    return labels, tracks

@@ -227,5 +227,112 @@ class MIRRORCAP_OT_stabilize_take(MirrorCapOperator):
                 f"-> {out.name}")
 
 
+def _take_clip(s, camera):
+    from ..common.clip import find_clip
+
+    clip = find_clip(input_path(s.video, what="rig video"))
+    if clip is None:
+        raise InputError("choose the rig video (the Capture panel's Video) first")
+    if tuple(clip.size) != tuple(camera.image_size):
+        raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the clip "
+                         f"is {clip.size[0]}x{clip.size[1]}")
+    return clip
+
+
+def _camera(s):
+    from ...core.geometry.camera import Camera
+
+    return Camera.load(required(input_path(s.camera, what="camera file"), "camera file (CAMERA.json)"))
+
+
+class MIRRORCAP_OT_take_to_clip(MirrorCapOperator):
+    """Write the take's markers as 2D tracks of the clip (<label>.<view>), to fix with Blender's own tracking tools before Re-solve"""
+
+    bl_idname = "mirrorcap.take_to_clip"
+    bl_label = "Take To Clip"
+
+    def run(self, context):
+        from ...core.common.files import read_json
+        from ...core.take.c3d import read_c3d
+        from ..common.clip import take_to_clip_tracks
+
+        s = scene_settings(context)
+        camera = _camera(s)
+        take = required(input_path(s.take, what="take"), "take (TAKE.c3d)")
+        report = read_json(required(input_path(str(take_report_path(take)), what="take report"), "take report"),
+                           "take report")
+        data = read_c3d(take)
+        clip = _take_clip(s, camera)
+        measured = ~np.asarray(data["conjectured"], bool)
+        n = take_to_clip_tracks(clip, data["labels"], data["points"], report["mirrors"], camera,
+                                first_frame=int(report["frames"]["first"]), measured=measured,
+                                step=int(report["frames"].get("step", 1)))
+        return (f"{n} tracks in the clip's 'MirrorCap Take' object: fix them with Blender's tracking tools "
+                "(rename a track <label>.<view> to give it a name), then Re-solve")
+
+
+class MIRRORCAP_OT_resolve(MirrorCapJobOperator):
+    """Re-estimate the mirrors from the clip's take tracks (your fixes included) and recompute every marker's 3D trajectory into the take"""
+
+    bl_idname = "mirrorcap.resolve"
+    bl_label = "Re-solve"
+
+    threshold_px: FloatProperty(name="Threshold (px)", default=2.0, min=0.1,
+                                description="epipolar distance within which a correspondence counts as one dot")
+    import_result: BoolProperty(name="Import Take", default=True, description="add the re-solved take as empties")
+
+    def prepare(self, context):
+        from ...core.common.files import read_json
+        from ...core.take.c3d import read_c3d
+        from ..common.clip import clip_tracks_to_take_tracks
+
+        s = scene_settings(context)
+        camera = _camera(s)
+        take = required(input_path(s.take, what="take"), "take (TAKE.c3d)")
+        report_path = take_report_path(take)
+        report = read_json(required(input_path(str(report_path), what="take report"), "take report"), "take report")
+        rate = float(read_c3d(take)["rate"])
+        clip = _take_clip(s, camera)
+        first, count = int(report["frames"]["first"]), int(report["frames"]["count"])
+        labels, tracks = clip_tracks_to_take_tracks(clip, count, first, int(report["frames"].get("step", 1)))
+        units = "mm" if report.get("units") == "mm" else "rel"
+        self._take = take
+
+        def work(progress):
+            import json
+
+            from ...core.common.files import write_files_atomically
+            from ...core.take.c3d import c3d_bytes
+            from ...core.track.resolve import resolve_tracks
+
+            progress(0.1, "re-estimating the mirrors")
+            res = resolve_tracks(labels, tracks, camera, report.get("mirrors"), self.threshold_px)
+            progress(0.9, "writing the take")
+            kept = np.flatnonzero(np.isfinite(res.points[..., 0]).any(axis=0))    # a deleted track: no marker
+            if kept.size == 0:
+                raise InputError("no marker could be reconstructed from the clip's take tracks")
+            names = [labels[i] for i in kept]
+            res.report["markers_without_a_frame"] = [labels[i] for i in np.setdiff1d(np.arange(len(labels)), kept)]
+            new = {**{k: v for k, v in report.items() if k not in ("head_pose", "per_frame", "mirror_agreement")},
+                   "mirrors": res.report["mirrors"], "markers": {"count": len(names), "labels": names},
+                   "resolve": res.report}
+            write_files_atomically({take: c3d_bytes(names, res.points[:, kept], rate, units=units),
+                                    report_path: json.dumps(new, indent=1) + "\n"})
+            return res
+
+        return work
+
+    def finish(self, context, res):
+        if self.import_result:
+            from ..common.take_io import import_take
+
+            import_take(context, self._take)
+        r = res.report
+        change = ", ".join(f"{c:.3f}" for c in r.get("mirror_change_deg", []))
+        return (f"re-solved {r['reconstructed']} of {r['correspondences']} marker-frames "
+                f"({r['rejected_correspondences']} correspondences not one dot, left out); mirrors moved "
+                f"{change or '-'} deg -> {self._take.name}")
+
+
 OPERATORS = (MIRRORCAP_OT_rigid_from_tracks, MIRRORCAP_OT_track, MIRRORCAP_OT_track_clip_tracks, MIRRORCAP_OT_import_take,
-             MIRRORCAP_OT_stabilize_take)
+             MIRRORCAP_OT_stabilize_take, MIRRORCAP_OT_take_to_clip, MIRRORCAP_OT_resolve)

@@ -28,6 +28,11 @@ class MIRRORCAP_PT_track(SidebarPanel, bpy.types.Panel):
         box.operator("mirrorcap.rigid_from_tracks", icon="RESTRICT_SELECT_OFF")
         col.operator("mirrorcap.track", icon="TRACKING")
         col.operator("mirrorcap.track_clip_tracks", icon="TRACKING_FORWARDS")
+        box = col.box()
+        box.label(text="Fix-ups: the take as clip tracks, then Re-solve")
+        row = box.row(align=True)
+        row.operator("mirrorcap.take_to_clip", icon="TRACKER")
+        row.operator("mirrorcap.resolve", icon="FILE_REFRESH")
         col.label(text="Esc cancels a running job", icon="INFO")
 
 

@@ -167,6 +167,11 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     f"({agreement['markers']} markers); the take's 3D points are off by up to that much -- "
                     + ("check MIRRORS.json, or track without it to self-calibrate" if mirror_source == "file"
                        else "the mirrors moved, or the clip shows too few markers in both mirrors"))
+    dropped_seeds = [] if seeds is None else [n for n in seeds.names if n not in result.labels]
+    if dropped_seeds:
+        log.warning(f"{len(dropped_seeds)} designation(s) of the seeds file did not hold ({', '.join(dropped_seeds[:6])}"
+                    f"{', ...' if len(dropped_seeds) > 6 else ''}): their direct and mirror points are not one dot, or the "
+                    "marker was lost; fix them in the clip (Take To Clip, rename the marker's tracks) and Re-solve")
     if result.undecided:
         log.warning(f"{len(result.undecided)} direct-view markers of the first frames could not be paired with a "
                     "mirror image (no 3D position): REPORT.json markers.undecided lists where they are")
