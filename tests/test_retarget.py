@@ -299,3 +299,37 @@ def test_transfer_bad_input_writes_nothing(tmp_path, head_and_keys):
     assert res.returncode == 2 and "--csv writes ARKit weights" in res.stderr, res.stderr
     assert not out.exists() and not (tmp_path / "r.json").exists() and not (tmp_path / "x.csv").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_closest_points_on_triangles_match_a_dense_search():
+    """The correspondence's nearest point on a triangle (vertex, edge and face regions) against a brute-force
+    search over 20,000 samples of each triangle."""
+    from mirrorcap.core.retarget.transfer import _closest_on_triangles
+
+    rng = np.random.default_rng(3)
+    A, B, C = (rng.normal(0, 5, (200, 3)) for _ in range(3))
+    P = rng.normal(0, 8, (200, 3))
+    bary, dist = _closest_on_triangles(P, A, B, C)
+    assert np.allclose(bary.sum(1), 1) and (bary >= -1e-12).all()
+    u, v = rng.uniform(0, 1, (2, 20000))
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    S = A[:, None] + u[None, :, None] * (B - A)[:, None] + v[None, :, None] * (C - A)[:, None]   # (200, 20000, 3)
+    brute = np.linalg.norm(S - P[:, None], axis=2).min(1)
+    edge = np.max([np.linalg.norm(B - A, axis=1), np.linalg.norm(C - B, axis=1), np.linalg.norm(A - C, axis=1)], 0)
+    assert np.all(dist <= brute + 1e-9) and np.all(brute - dist < 0.02 * edge)    # the samples' spacing
+
+
+def test_feature_distance_scales_follow_a_characters_proportions(head_and_keys):
+    """Seed 001's scaling: a character 12 % wider and 12 % shorter gets lateral scales 1.12 and down
+    scales ~0.88 in both halves of the face; the generic head onto itself is 1 everywhere."""
+    from mirrorcap.core.retarget.transfer import region_scales
+
+    head, _ = head_and_keys
+    same = region_scales(head, head)
+    assert np.allclose(same["upper"], 1) and np.allclose(same["lower"], 1)
+    wide = HeadModel(vertices=head.vertices * [1.12, 0.88, 1.0], polygons=head.polygons,
+                     polygon_sizes=head.polygon_sizes, groups=head.groups, name="wide")
+    sc = region_scales(head, wide)
+    assert sc["upper"][0] == pytest.approx(1.12, abs=0.005) and sc["lower"][0] == pytest.approx(1.12, abs=0.005)
+    assert 0.87 < sc["upper"][1] < 0.9 and 0.87 < sc["lower"][1] < 0.9

@@ -67,6 +67,18 @@ def _class_of(name: str) -> int:
     return 0
 
 
+def track_markers(track):
+    """A clip track's markers as arrays: clip frames ``(n,)``, normalised positions ``(n, 2)``, muted ``(n,)``."""
+    n = len(track.markers)
+    fr = np.empty(n, np.int32)
+    co = np.empty(2 * n, np.float32)
+    mute = np.empty(n, bool)
+    track.markers.foreach_get("frame", fr)
+    track.markers.foreach_get("co", co)
+    track.markers.foreach_get("mute", mute)
+    return fr, co.reshape(-1, 2), mute
+
+
 def clip_tracks_to_detections(clip, layout=None, object_name: str | None = None):
     """Per-frame detections (:class:`core.capture.views.FrameDets`) from the clip's tracks: frame numbers
     (0-based video frames) and frames. Muted markers are left out; views come from ``layout``
@@ -80,17 +92,11 @@ def clip_tracks_to_detections(clip, layout=None, object_name: str | None = None)
     rows = []
     for obj in objects:
         for track in obj.tracks:
-            n = len(track.markers)
-            if n == 0:
+            if len(track.markers) == 0:
                 continue
-            fr = np.empty(n, np.int32)
-            co = np.empty(2 * n, np.float32)
-            mute = np.empty(n, bool)
-            track.markers.foreach_get("frame", fr)
-            track.markers.foreach_get("co", co)
-            track.markers.foreach_get("mute", mute)
+            fr, co, mute = track_markers(track)
             keep = ~mute
-            co = co.reshape(-1, 2)[keep]
+            co = co[keep]
             k = np.full(keep.sum(), _class_of(track.name))
             rows.append(np.c_[fr[keep] - 1, co[:, 0] * w - 0.5, (1.0 - co[:, 1]) * h - 0.5, k])
     if not rows:
@@ -183,19 +189,13 @@ def clip_tracks_to_take_tracks(clip, n_frames: int, first_frame: int = 0, step: 
         if not label or view not in VIEW_NAMES:
             raise InputError(f"track {track.name!r}: take tracks are named <label>.<view> with view one of "
                              f"{', '.join(VIEW_NAMES)}")
-        n = len(track.markers)
-        if n == 0:
+        if len(track.markers) == 0:
             continue
-        fr = np.empty(n, np.int32)
-        co = np.empty(2 * n, np.float32)
-        mute = np.empty(n, bool)
-        track.markers.foreach_get("frame", fr)
-        track.markers.foreach_get("co", co)
-        track.markers.foreach_get("mute", mute)
+        fr, co, mute = track_markers(track)
         off = fr - 1 - first_frame
         f = off // step
         keep = ~mute & (off % step == 0) & (f >= 0) & (f < n_frames)
-        co = co.reshape(-1, 2)[keep]
+        co = co[keep]
         per.setdefault(label, {})[VIEW_NAMES.index(view)] = (f[keep], np.c_[co[:, 0] * w - 0.5, (1.0 - co[:, 1]) * h - 0.5])
     labels = sorted(per)
     tracks = np.full((n_frames, len(labels), 3, 2), np.nan)

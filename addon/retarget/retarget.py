@@ -122,6 +122,23 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
     return result
 
 
+def _take_and_actor(take, head_blend, head_object, head_pose_report, marker_map, outputs):
+    """What both methods read first (output folders checked): the take, its frame count, head pose and
+    marker map, and the actor's head, shape keys and name (HEAD.blend left open)."""
+    for path in outputs:
+        if path is not None and not Path(path).resolve().parent.is_dir():
+            raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
+    data = read_c3d(take)
+    F = data["points"].shape[0]
+    pose = None if head_pose_report is None else head_pose_from_report(head_pose_report, F)
+    mapping = load_marker_map(marker_map) if marker_map else None
+    open_blend(head_blend)
+    actor = find_head_object(head_object)
+    head = read_head(actor)
+    head.validate()
+    return data, F, pose, mapping, head, read_shape_keys(actor), actor.name
+
+
 def run_retarget(take, head_blend, target_blend, output, target_object=None, method: str = "arkit",
                  csv=None, head_pose_report=None, report=None, marker_map=None, neutral_frame: int = 0,
                  smoothness: float | None = None, head_object=None, drop_unseen: bool = False,
@@ -139,20 +156,10 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
                             head_pose_report=head_pose_report, report=report, marker_map=marker_map,
                             neutral_frame=neutral_frame, head_object=head_object, drop_unseen=drop_unseen,
                             conjecture_unseen=conjecture_unseen, mode=mode, n_modes=n_modes, progress=progress)
-    for path in (output, csv, report):
-        if path is not None and not Path(path).resolve().parent.is_dir():
-            raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
     t0 = time.perf_counter()
-    data = read_c3d(take)
-    F = data["points"].shape[0]
-    pose = None if head_pose_report is None else head_pose_from_report(head_pose_report, F)
-    mapping = load_marker_map(marker_map) if marker_map else None
-    open_blend(head_blend)
-    actor = find_head_object(head_object)
-    actor_name = actor.name
-    head = read_head(actor)
-    head.validate()
-    shape_keys = read_shape_keys(actor)
+    data, F, pose, mapping, head, shape_keys, actor_name = _take_and_actor(take, head_blend, head_object,
+                                                                            head_pose_report, marker_map,
+                                                                            (output, csv, report))
     t1 = time.perf_counter()
     binding, solve, angles = retarget_take(head, shape_keys, data["labels"], data["points"],
                                            neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
@@ -188,22 +195,12 @@ def run_transfer(take, head_blend, target_blend, output, target_object=None, hea
     and no shape keys (:func:`core.retarget.transfer.transfer_take`), keyed as ``bake`` keys a head."""
     if mode not in MODES:
         raise InputError(f"--mode must be one of {', '.join(MODES)}")
-    for path in (output, report):
-        if path is not None and not Path(path).resolve().parent.is_dir():
-            raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
     t0 = time.perf_counter()
-    data = read_c3d(take)
-    F = data["points"].shape[0]
+    data, F, pose, mapping, head, shape_keys, actor_name = _take_and_actor(take, head_blend, head_object,
+                                                                            head_pose_report, marker_map,
+                                                                            (output, report))
     if mode == "pca" and not 1 <= n_modes <= F:
         raise InputError(f"--modes must be between 1 and the take's {F} frames")
-    pose = None if head_pose_report is None else head_pose_from_report(head_pose_report, F)
-    mapping = load_marker_map(marker_map) if marker_map else None
-    open_blend(head_blend)
-    actor = find_head_object(head_object)
-    actor_name = actor.name
-    head = read_head(actor)
-    head.validate()
-    shape_keys = read_shape_keys(actor)
     open_blend(target_blend)
     target_obj = find_landmarked_object(target_object)
     target = read_head(target_obj)
