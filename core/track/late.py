@@ -1,16 +1,20 @@
 """Late markers (Lin 2003, section 5.8 "missing markers", the case of a marker first seen
 after the neutral frame): chains of unclaimed candidates linked frame to frame become new
 markers, entered at their neutral position so they pass the neighbour test and merge with
-their own earlier chains."""
+their own earlier chains; after the final pass, a later chain that the tracking kept apart from its
+marker merges back into it (:func:`merge_split_labels`)."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
 from ..geometry.rigid import rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates
-from .result import COLOUR_SPACING_MM, TrackSettings, earns_place
+from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
+from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place
 
 
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
@@ -216,3 +220,69 @@ def _motion_near(first_pass, real, where, frame, radius_mm: float, kc: float = 1
     w = np.where((d <= radius_mm) & np.isfinite(motion[..., 0]), 1.0 / (d + kc), 0.0)
     total = w.sum(axis=1, keepdims=True)
     return np.einsum("mr,mrd->md", w, np.nan_to_num(motion)) / np.where(total > 0, total, 1.0)
+
+
+MERGE_MM = 1.0          # a later chain continues a marker when it lies this near the marker's conjecture
+# (the takes' conjectures are 0.2-0.3 mm RMS off where measured: 1 mm is over 3 sigma)
+MERGE_SEARCH_MM = 15.0  # ... among the markers whose neutral positions lie this near
+
+
+def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
+    """Offline, a marker picked up again later as a new chain (a *split*: one dot, two labels) is
+    merged back. Two labels that are never measured in the same frame, whose neutral positions lie
+    within :data:`MERGE_SEARCH_MM`, where the earlier one's conjecture at the later one's measured
+    frames (the learned neighbour relations of :func:`_fill_gaps`, eq. 5.8) lies within
+    :data:`MERGE_MM` of them (median), and no other label comes within twice that: the later chain's
+    measurements become the earlier marker's."""
+    measured = result.assigned_blob >= 0
+    F, N = measured.shape
+    if N < 3:
+        return result
+    motion = result.head_frame - result.neutral[None]
+    first = np.where(measured.any(axis=0), np.argmax(measured, axis=0), F)
+    nidx, _ = neighbours(result.neutral, s.neighbour_radius_mm)
+    near, _ = neighbours(result.neutral, MERGE_SEARCH_MM)
+    pairs = []
+    for b in np.flatnonzero(measured.sum(axis=0) >= s.min_measured_frames):
+        cands = [a for a in near[b] if a >= 0 and first[a] < first[b] and not (measured[:, a] & measured[:, b]).any()]
+        if not cands:
+            continue
+        gaps = np.zeros((F, N), bool)
+        gaps[np.ix_(measured[:, b], cands)] = True
+        est, _ = conjecture_gaps(motion, measured, gaps, nidx[:, :12], 1.0, s.min_measured_frames,
+                                 correlation=RELATION_CORRELATION)
+        frames = np.flatnonzero(measured[:, b])
+        d = np.array([np.nanmedian(np.linalg.norm(result.neutral[a] + est[frames, a] - result.head_frame[frames, b],
+                                                  axis=1)) if np.isfinite(est[frames, a, 0]).any() else np.inf
+                      for a in cands])
+        order = np.argsort(d)
+        if d[order[0]] <= MERGE_MM and (d.size == 1 or d[order[1]] > 2.0 * MERGE_MM):
+            pairs.append((cands[order[0]], b))
+    if not pairs:
+        return result
+    keep = np.ones(N, bool)
+    for a, b in pairs:
+        if not keep[a] or not keep[b]:
+            continue
+        take = measured[:, b]
+        for name in ("points", "head_frame"):
+            getattr(result, name)[take, a] = getattr(result, name)[take, b]
+        result.assigned_blob[take, a] = result.assigned_blob[take, b]
+        result.camera_mask[take, a] = result.camera_mask[take, b]
+        result.conjectured[take, a] = False
+        if result.candidate is not None:
+            result.candidate[take, a] = result.candidate[take, b]
+        keep[b] = False
+    result.stats["merged_labels"] = np.array([int((~keep).sum())])
+    idx = np.flatnonzero(keep)
+    out = replace(result, labels=[result.labels[i] for i in idx], points=result.points[:, idx],
+                  conjectured=result.conjectured[:, idx], camera_mask=result.camera_mask[:, idx],
+                  neutral=result.neutral[idx], first_blob=result.first_blob[idx],
+                  assigned_blob=result.assigned_blob[:, idx], colour=result.colour[idx],
+                  head_frame=result.head_frame[:, idx],
+                  candidate=None if result.candidate is None else result.candidate[:, idx])
+    if result.rigid is not None:
+        remap = -np.ones(N, int)
+        remap[idx] = np.arange(idx.size)
+        out.rigid = remap[np.asarray(result.rigid)][remap[np.asarray(result.rigid)] >= 0]
+    return out

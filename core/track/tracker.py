@@ -42,7 +42,7 @@ from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
-from .late import add_late_markers
+from .late import add_late_markers, merge_split_labels
 from .motion import (
     RELATION_CORRELATION,
     ConstantVelocityKalman,
@@ -259,6 +259,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
     result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
     result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
+    result = merge_split_labels(result, s)
     lap("final_pass")
     _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     lap("gap_fill")
