@@ -226,3 +226,30 @@ def test_faps_of_the_sample_follow_its_true_jaw_and_a_played_fap_file_reproduces
     again = mpeg4.faps_from_motion(head, seen, points=report["feature_points"], high_level=False)
     low = [f.number - 1 for f in mpeg4.LOW_LEVEL_FAPS if track.mask[f.number - 1]]
     assert np.abs(again.values[:, low] - track.values[:, low]).max() <= 1.0
+    # with --head-motion the file's head rotation (FAPs 48-50) turns the object, frame by frame
+    turned = tmp_path / "turned.blend"
+    res = _run(["-m", "mirrorcap", "bake", "--fap", fap, "--head", out / "fitted_head.blend", "-o", turned,
+                "--no-blinks", "--head-motion"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    code = ("import bpy, json, numpy as np\n"
+            f"bpy.ops.wm.open_mainfile(filepath={str(turned)!r})\n"
+            f"obj = bpy.data.objects[{report['object']!r}]\n"
+            "out = []\n"
+            "for f in range(1, 121):\n"
+            "    bpy.context.scene.frame_set(f)\n"
+            "    out.append([list(r) for r in obj.matrix_world.to_3x3()])\n"
+            "print('ROT ' + json.dumps(out))\n")
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stdout + res.stderr
+    Rb = np.array(json.loads(res.stdout.split("ROT ", 1)[1]))
+    C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])                 # blender = C @ core
+    R = np.einsum("ji,fjk,kl->fil", C, Rb, C)                           # back on core coordinates
+    from mirrorcap.core.retarget.arkit import head_angles
+
+    R0 = np.linalg.inv(R[0])                                            # the rotation the object had before
+    turn = head_angles(np.einsum("fij,jk->fik", R, R0), head.face_axes())[:, [1, 0, 2]]
+    want = (track.values[:, 47:50] - track.values[0, 47:50]) * mpeg4.AU_RAD
+    print(f"head rotation keyed within {np.degrees(np.abs(turn - want).max()):.3f} deg of the file's "
+          f"(it turns up to {np.degrees(np.abs(want).max()):.1f} deg)")
+    assert track.mask[47:50].all() and np.degrees(np.abs(want).max()) > 1.0
+    assert np.degrees(np.abs(turn - want).max()) < 0.05

@@ -172,3 +172,20 @@ def head_angles(R, axes: dict) -> np.ndarray:
     pitch = np.arcsin(np.clip(-Rl[:, 1, 2], -1.0, 1.0))
     roll = np.arctan2(Rl[:, 1, 0], Rl[:, 1, 1])
     return np.stack([yaw, pitch, roll], axis=1)
+
+
+def rotations_from_angles(yaw_pitch_roll, axes: dict) -> np.ndarray:
+    """The inverse of :func:`head_angles`: rotations ``(F, 3, 3)`` in the head's frame from yaw, pitch
+    and roll ``(F, 3)`` in radians (``R = C^T R_y(yaw) R_x(pitch) R_z(roll) C``, ``C`` the head's
+    lateral, up and forward axes as rows)."""
+    a = np.asarray(yaw_pitch_roll, float).reshape(-1, 3)
+    up = -np.asarray(axes["down"], float)
+    C = np.stack([np.asarray(axes["lateral"], float), up, np.asarray(axes["forward"], float)])
+    cy, sy = np.cos(a[:, 0]), np.sin(a[:, 0])
+    cp, sp = np.cos(a[:, 1]), np.sin(a[:, 1])
+    cr, sr = np.cos(a[:, 2]), np.sin(a[:, 2])
+    z, o = np.zeros(len(a)), np.ones(len(a))
+    Ry = np.stack([np.stack([cy, z, sy], -1), np.stack([z, o, z], -1), np.stack([-sy, z, cy], -1)], 1)
+    Rx = np.stack([np.stack([o, z, z], -1), np.stack([z, cp, -sp], -1), np.stack([z, sp, cp], -1)], 1)
+    Rz = np.stack([np.stack([cr, -sr, z], -1), np.stack([sr, cr, z], -1), np.stack([z, z, o], -1)], 1)
+    return C.T @ (Ry @ Rx @ Rz) @ C

@@ -490,10 +490,14 @@ def read_fap(path) -> FapTrack:
 def replay_take(track: FapTrack, head, points: dict | None = None):
     """A .fap track as a sparse take on ``head``: ``(labels, points (F, P, 3), marker_map,
     head_pose (F, 3, 4))`` -- one marker ``fp_<id>`` per moved feature point, at its vertex plus
-    its displacement (head frame, mm), bound to that vertex by the marker map, the head still
-    (identity pose), ready for :func:`..face.animate.animate_take`. Feature points on one vertex
-    (the inner and outer lip corners of a head with a thin lip) are one marker, at the mean of
-    their displacements."""
+    its displacement (head frame, mm), bound to that vertex by the marker map, ready for
+    :func:`..face.animate.animate_take`. The head turns as FAPs 48-50 say (pitch, yaw, roll about the
+    head's axes through its origin; :func:`.arkit.rotations_from_angles`), and the pose says so, so
+    the binding recovers it as the take's head motion (``bake --head-motion`` keys it); without them
+    the head is still. Feature points on one vertex (the inner and outer lip corners of a head with a
+    thin lip) are one marker, at the mean of their displacements."""
+    from .arkit import rotations_from_angles
+
     names, vertices, D = feature_point_displacements(track, head, points)
     unique, group = np.unique(vertices, return_inverse=True)
     counts = np.bincount(group)
@@ -504,6 +508,12 @@ def replay_take(track: FapTrack, head, points: dict | None = None):
     vertices = unique
     pts = head.vertices[vertices][None] + D
     pose = np.tile(np.c_[np.eye(3), np.zeros(3)], (track.frames, 1, 1))
+    rot = [number - 1 for number, _ in HEAD_ROTATION]
+    if track.mask[rot].any():
+        pitch_yaw_roll = np.where(track.mask[rot], track.values[:, rot], 0.0) * AU_RAD
+        R = rotations_from_angles(pitch_yaw_roll[:, [1, 0, 2]], head.face_axes())
+        pts = np.einsum("fij,fmj->fmi", R, pts)
+        pose[:, :, :3] = R
     return labels, pts, dict(zip(labels, (int(v) for v in vertices))), pose
 
 
