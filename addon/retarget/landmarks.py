@@ -16,6 +16,9 @@ from ..common.jobs import MirrorCapOperator
 
 #: the order Place Landmarks asks for them (the optional lower lip last)
 LANDMARK_ORDER = TRANSFER_LANDMARKS + ("lower_lip",)
+#: events Place Landmarks leaves to the 3D View (navigation between clicks)
+NAVIGATION = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "TRACKPADPAN",
+              "TRACKPADZOOM", "MOUSEROTATE"}
 
 
 def placed_landmarks(obj) -> set:
@@ -109,8 +112,10 @@ class MIRRORCAP_OT_place_landmarks(MirrorCapOperator):
     def modal(self, context, event):
         from bpy_extras import view3d_utils
 
+        if event.type in NAVIGATION or (event.type.startswith("NUMPAD_") and event.type != "NUMPAD_ENTER"):
+            return {"PASS_THROUGH"}                       # orbit, pan and zoom the view between clicks
         if event.value != "PRESS":
-            return {"PASS_THROUGH"} if event.type in {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE"} else {"RUNNING_MODAL"}
+            return {"RUNNING_MODAL"}
         if event.type == "ESC":
             context.area.header_text_set(None)
             self.report({"WARNING"}, "Place Landmarks: cancelled; nothing was changed")
