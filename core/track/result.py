@@ -33,6 +33,8 @@ class TrackSettings:
     rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
     min_measured_frames: int = 10  # a marker measured in fewer frames is not reported (a chain of chance
     # pairings -- a direct blob with another marker's mirror image -- seldom lasts ten frames)
+    single_views: bool = True  # after gap filling, conjectured markers measured from a blob in one or two views
+    # where their dot is seen after all (core.track.singleview)
     min_measured_fraction: float = 0.25  # ... nor one this rarely measured that is lost for good (see keep_measured)
 
     @classmethod

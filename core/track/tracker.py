@@ -43,6 +43,7 @@ from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
 from .late import add_late_markers, merge_split_labels
+from .singleview import measure_in_single_views
 from .motion import (
     RELATION_CORRELATION,
     ConstantVelocityKalman,
@@ -261,7 +262,13 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     result = merge_split_labels(result, s)
     lap("final_pass")
-    _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
+    conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
+    if s.single_views:
+        found = measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected,
+                                        s.band_px, 3 * s.min_measured_frames)
+        result.stats["measured_in_one_view"] = found["one_view"]
+        result.stats["measured_in_two_views_after_gap_fill"] = found["two_views"]
+        result.stats["conjectured"] = result.conjectured.sum(axis=1)
     lap("gap_fill")
     result.undecided = _still_undecided(undecided, result)
     result.timings = timings
@@ -305,7 +312,7 @@ def rigid_by_image(camera: Camera, neutral, colour, region=None, colours=None) -
 
 
 def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_neighbours: int = 12,
-               ridge_mm2: float = 1.0, min_frames: int = 10, max_sd_mm: float = np.inf) -> None:
+               ridge_mm2: float = 1.0, min_frames: int = 10, max_sd_mm: float = np.inf):
     """Conjectures redone with the whole take known (it is offline).
 
     1. Learned neighbour relations (:func:`core.track.motion.learned_conjectures`, eq. 5.8
@@ -340,7 +347,7 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
     result.stats["withheld"] = np.zeros(F, int)
     result.stats["conjectured"] = result.conjectured.sum(axis=1)
     if rows.size == 0:
-        return
+        return np.full(result.points.shape, np.nan), np.full(measured.shape, np.nan)
     nidx, ndist = neighbours(result.neutral, radius_mm)
     learned_motion, sd = conjecture_gaps(motion, measured, gaps, nidx[:, :learned_neighbours], ridge_mm2, min_frames,
                                          correlation=RELATION_CORRELATION)
@@ -371,17 +378,19 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
     R = rotation_zyx(result.head_pose[t, :3])
     result.points[t, i] = np.einsum("mij,mj->mi", R, head) + result.head_pose[t, 3:]
 
+    conjecture = np.where(gaps[..., None], result.points, np.nan)
+    typical = np.nanmedian(sd[gaps]) if np.isfinite(sd[gaps]).any() else 0.2
+    frames_off = np.minimum(np.where(last >= 0, np.arange(F)[:, None] - last, F),
+                            np.where(nxt < F, nxt - np.arange(F)[:, None], F))
+    expected = np.where(gaps, grown_sd(np.where(np.isnan(sd), typical, sd), frames_off), np.nan)
     if np.isfinite(max_sd_mm):
-        typical = np.nanmedian(sd[gaps]) if np.isfinite(sd[gaps]).any() else 0.2
-        frames_off = np.minimum(np.where(last >= 0, np.arange(F)[:, None] - last, F),
-                                np.where(nxt < F, nxt - np.arange(F)[:, None], F))
-        expected = grown_sd(np.where(np.isnan(sd), typical, sd), frames_off)
         withheld = _withheld_onwards(gaps & (expected > max_sd_mm), measured, last, nxt) & gaps
         result.points[withheld] = np.nan
         result.head_frame[withheld] = np.nan
         result.conjectured[withheld] = False
         result.stats["withheld"] = withheld.sum(axis=1)
     result.stats["conjectured"] = result.conjectured.sum(axis=1)
+    return conjecture, expected
 
 
 def _withheld_onwards(withheld, measured, last, nxt):
