@@ -126,9 +126,11 @@ def test_a_normal_light_clip_is_tracked_with_no_user_input(tone, tmp_path, capsy
     assert s["identity_switches"] == 0 and s["split_markers"] == 0
     assert s["rms_mm"] < 0.5 and s["max_mm"] < 2.0                # 0.21 / 0.22 mm RMS, 1.7 / 1.5 mm max measured
     assert s["conjectured_max_mm"] < 2.0                           # no reported point more than 2 mm off
-    # 97.7 % (light) and 98.3 % (dark) of the marker-frames seen in the direct view and a mirror are
-    # reported (91.9 and 95.7 % before 2D continuity and the both-mirror pairing of the midline)
-    assert s["seen_reported_fraction"] > 0.97, s["seen_reported_fraction"]
+    # issue #21's target: 98.2 % (light) and 98.9 % (dark) of the marker-frames seen in the direct view
+    # and a mirror are reported (97.7 and 98.3 % before dots were followed through gaps and conjectures
+    # measured where their dots are seen, core.track.singleview; 91.9 and 95.7 % before 2D continuity
+    # and the both-mirror pairing of the midline)
+    assert s["seen_reported_fraction"] > 0.98, s["seen_reported_fraction"]
     assert json.loads(rep.read_text())["mirror_agreement"]["consistent"] is True
 
 

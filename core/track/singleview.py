@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 from ..capture.views import ClipDetections
 from ..geometry.mirror import reflect_points
 from ..geometry.rigid import rotation_zyx
-from .result import COLOUR_SPACING_MM, TrackResult
+from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings
 
 MAX_GATE_PX = 2.5        # the largest distance (pixels) from the predicted image to the blob taken
 DETECTION_PX = 0.75      # the detections' own noise, added to the projected conjecture error (pixels)
@@ -49,6 +49,15 @@ TWO_VIEW_SIGMAS = 3.0    # a two-view point must lie within this many expected e
 CONTINUITY_PX = 1.0      # the dot in the frame before or after lies this near where it should (pixels)
 MEETING_PERCENTILE = 90  # two rays must meet as closely as this share of the take's measured pairs do
 MEETING_SAMPLE = 20000   # measured pairs that set that limit, at most
+SETTLED_FACTOR = 3       # a marker takes part once measured in this many times TrackSettings.min_measured_frames
+# following a dot (follow_dots_through_gaps):
+LINK_PX = 10.0           # the next frame's blob within this of where its velocity puts it (pixels) and within
+# SPACING_SHARE of the view's typical dot spacing,
+LINK_RATIO = 2.0         # the next nearest blob this much further off,
+RIVAL_MM = 1.0           # any other 3D candidate on the direct ray LINK_RATIO times further from the prediction + this,
+DEPTH_RATIO = 2.0        # the step's surprise along each view's ray at most this times the one across it
+DEPTH_SLACK_MM = 0.5     # plus this;
+MAX_COAST = 3            # a chain that finds no dot coasts on its velocity this many frames at most
 
 
 def _image(points, view: int, normals, ds):
@@ -129,6 +138,46 @@ def _lasts(det: ClipDetections, view: int, blob, pred, frame, marker, colour, re
     return lasts
 
 
+def _alone_on_its_ray(cands, direct_blob, point, predicted) -> np.ndarray:
+    """Whether each ``point`` (made from the direct blob ``direct_blob``, global index, and a mirror
+    blob) is the only 3D candidate of that direct blob near the marker's ``predicted`` position:
+    every other candidate on the direct ray (another mirror blob in its epipolar band, at another
+    depth, :func:`.candidates.clip_candidates`) must be :data:`LINK_RATIO` times further from the
+    prediction, plus :data:`RIVAL_MM`. On a dense face a mirror's epipolar band holds several
+    markers' images, and the wrong one puts the right direct dot at the wrong depth."""
+    lo = np.searchsorted(cands.direct, direct_blob, "left")
+    hi = np.searchsorted(cands.direct, direct_blob, "right")
+    n = hi - lo
+    row = np.repeat(np.arange(direct_blob.size), n)
+    idx = np.repeat(lo - np.cumsum(n) + n, n) + np.arange(n.sum())
+    other = cands.points[idx]
+    own = np.linalg.norm(point - predicted, axis=1)
+    elsewhere = np.linalg.norm(other - point[row], axis=1) > RIVAL_MM
+    rival = elsewhere & (np.linalg.norm(other - predicted[row], axis=1) < LINK_RATIO * own[row] + RIVAL_MM)
+    return np.bincount(row[rival], minlength=direct_blob.size) == 0
+
+
+def _typical_spacing(det: ClipDetections, view: int, focal_px: float, sample: int = 20000) -> float:
+    """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,
+    of any colour, over up to ``sample`` blobs."""
+    xy = _tree_points(det.norm[view], det.frame[view], np.zeros(len(det.frame[view])), focal_px)
+    if len(xy) < 2:
+        return np.inf
+    d, _ = cKDTree(xy).query(xy[:: max(1, len(xy) // sample)], k=2)
+    return float(np.median(d[:, 1]))
+
+
+def _surprise_matches(surprise, ray) -> np.ndarray:
+    """Whether a chain's step is as surprising along ``ray`` (unit, ``(n, 3)``) as across it: the
+    component of ``surprise`` (the point less its prediction, mm) along the ray is at most
+    :data:`DEPTH_RATIO` times the component across it plus :data:`DEPTH_SLACK_MM`. Along a view's
+    ray only the other view's blob moves the point; a blob there that is not the dot moves it in
+    that direction alone, while a real change of motion shows across the ray too."""
+    along = np.sum(surprise * ray, axis=1)
+    across = np.linalg.norm(surprise - along[:, None] * ray, axis=1)
+    return np.abs(along) <= DEPTH_RATIO * across + DEPTH_SLACK_MM
+
+
 def _claimed(result: TrackResult, det: ClipDetections, cands, view: int) -> np.ndarray:
     """Blobs of ``view`` (global indices) that a measured marker holds, as a boolean mask."""
     taken = np.zeros(len(det.frame[view]), bool)
@@ -151,7 +200,7 @@ def _tree_points(xy, frame, colour, focal_px: float) -> np.ndarray:
 
 
 def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                            conjecture, expected_sd, band_px: float, min_frames: int = 30) -> dict:
+                            conjecture, expected_sd, settings: TrackSettings) -> dict:
     """Measure the gap cells of ``result`` from unclaimed blobs (module text).
     ``conjecture (F, N, 3)``: every gap cell's conjectured camera-frame point, withheld or not
     (NaN elsewhere); ``expected_sd (F, N)``: its expected 3D error (mm); ``band_px``: the
@@ -159,6 +208,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
     measured in fewer than ``min_frames`` frames are left alone. Updates ``points``,
     ``head_frame``, ``conjectured``, ``camera_mask`` and ``assigned_blob`` in place; returns the
     cells measured per frame, ``{"two_views": (F,), "one_view": (F,)}``."""
+    band_px, min_frames = settings.band_px, SETTLED_FACTOR * settings.min_measured_frames
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
@@ -170,6 +220,8 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
     F = measured.shape[0]
     counts = {"two_views": np.zeros(F, int), "one_view": np.zeros(F, int)}
     if f_c.size == 0:
+        result.stats["measured_in_one_view"] = counts["one_view"]
+        result.stats["measured_in_two_views_after_gap_fill"] = counts["two_views"]
         return counts
     # a withheld conjecture (expected off by more than the take allows) is reported again only where two
     # views measure the marker; one view refines a reported conjecture but does not bring back a withheld one
@@ -279,4 +331,150 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
     result.conjectured[f, i] = ~both
     result.camera_mask[f, i] = np.where(both, mask[done], 0)
     result.assigned_blob[f[both], i[both]] = blob[done][both, 0] - det.start[0][f[both]]
+    result.stats["measured_in_one_view"] = counts["one_view"]
+    result.stats["measured_in_two_views_after_gap_fill"] = counts["two_views"]
+    result.stats["conjectured"] = result.conjectured.sum(axis=1)
     return counts
+
+
+def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
+                             settings: TrackSettings) -> np.ndarray:
+    """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
+    ends. From the last frame a marker was measured in (and backwards from the next), its direct
+    blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
+    dot in starts from the image of its 3D point moved by its 3D velocity). The marker is measured
+    in the next frame where, in the direct view and a mirror,
+
+    * an unclaimed blob of its colour lies within :data:`LINK_PX` of the predicted image, and
+      within :data:`SPACING_SHARE` of the view's typical dot spacing, the next blob at least
+      :data:`LINK_RATIO` times further;
+    * the two rays meet as the take's own pairs do (:func:`_meeting_limit`), within the tracker's
+      gate (``gate_mm``) of the marker's last point;
+    * no other 3D candidate of the direct blob (another mirror image in its epipolar band) lies
+      about as near the predicted point (:func:`_alone_on_its_ray`);
+    * the step is as surprising along each view's ray as across it (:func:`_surprise_matches`):
+      a wrong blob in one view moves the point along the other view's ray only.
+
+    A chain that finds nothing coasts on its velocity for up to :data:`MAX_COAST` frames; a blob
+    two chains reach in one frame stops both. Identity comes from the dots' continuity, not from
+    the neighbours: this reaches markers whose expression outran the passes' gate and the
+    conjecture (fast lips). Updates ``result`` in place; returns the cells measured per frame
+    (``stats["followed_through_gaps"]``)."""
+    normals = np.asarray(normals, float)
+    ds = np.asarray(ds, float)
+    K = len(normals)
+    F, N = result.assigned_blob.shape
+    measured = result.assigned_blob >= 0
+    per_frame = np.zeros(F, int)
+    result.stats["followed_through_gaps"] = per_frame
+    settled = measured.sum(axis=0) >= SETTLED_FACTOR * settings.min_measured_frames
+    if K == 0 or not settled.any():
+        return per_frame
+    limit = min(settings.band_px, _meeting_limit(result, det, cands, normals, ds, focal_px))
+    trees = [cKDTree(_tree_points(det.norm[v], det.frame[v], det.colour[v], focal_px)) for v in range(K + 1)]
+    # the search radius in each view: at most SPACING_SHARE of the dots' typical spacing there
+    radius = np.array([min(LINK_PX, SPACING_SHARE * _typical_spacing(det, v, focal_px)) for v in range(K + 1)])
+    claimed = [_claimed(result, det, cands, v) for v in range(K + 1)]
+    blobs = np.full((F, N, K + 1), -1)                 # each measured cell's global blob per view
+    f, i = np.nonzero(measured)
+    blobs[f, i, 0] = result.assigned_blob[f, i] + det.start[0][f]
+    c = result.candidate[f, i]
+    blobs[f[c >= 0], i[c >= 0], 1:] = cands.mirror_blob[c[c >= 0]]
+    R = rotation_zyx(result.head_pose[:, :3])
+
+    def pixels(v, b):
+        return np.where((b >= 0)[:, None], det.norm[v][np.maximum(b, 0)] * focal_px, np.nan)
+
+    for step in (1, -1):
+        # the chains start where a measured frame of a settled marker borders an unmeasured one
+        nxt = np.roll(measured, -step, axis=0)
+        edge = np.zeros(F, bool)
+        edge[-1 if step == 1 else 0] = True
+        frame, marker = np.nonzero(measured & ~nxt & ~edge[:, None] & settled[None])
+        before = frame - step
+        prev_ok = (before >= 0) & (before < F)
+        before = np.clip(before, 0, F - 1)
+        pos = np.stack([pixels(v, blobs[frame, marker, v]) for v in range(K + 1)], axis=1)        # (n, K+1, 2)
+        prev = np.stack([pixels(v, np.where(prev_ok, blobs[before, marker, v], -1)) for v in range(K + 1)], axis=1)
+        vel = np.where(np.isfinite(prev), pos - prev, 0.0)
+        alive = np.isfinite(pos[..., 0])
+        last_point = result.points[frame, marker]
+        before_point = result.points[before, marker]
+        vel3 = np.where((prev_ok & measured[before, marker])[:, None], last_point - before_point, 0.0)
+        colour = result.colour[marker]
+        coast = np.zeros(frame.size, int)
+        while frame.size:
+            g = frame + step
+            go = (g >= 0) & (g < F) & alive[:, 0]
+            g = np.clip(g, 0, F - 1)
+            go &= ~measured[g, marker]
+            new_blob = np.full((frame.size, K + 1), -1)
+            for v in range(K + 1):
+                # a mirror the chain has no dot in yet: its image of the marker's last point
+                if v > 0:
+                    img, z = _image(last_point + vel3 * (1 + coast[:, None]), v, normals, ds)
+                    fresh = ~alive[:, v] & np.all(np.isfinite(img), axis=1) & (z > 0)
+                    pos[fresh, v], vel[fresh, v] = img[fresh] * focal_px, 0.0
+                    alive[:, v] |= fresh
+                want = go & alive[:, v]
+                if not want.any():
+                    continue
+                pred = (pos[want, v] + vel[want, v]) / focal_px
+                d, j = trees[v].query(_tree_points(pred, g[want], colour[want], focal_px), k=2)
+                j0 = np.minimum(j[:, 0], len(det.frame[v]) - 1)
+                ok = (d[:, 0] <= radius[v]) & (d[:, 1] >= LINK_RATIO * d[:, 0]) & ~claimed[v][j0]
+                new_blob[np.flatnonzero(want)[ok], v] = j0[ok]
+            for v in range(K + 1):                    # a blob two chains reach goes to neither
+                taken = new_blob[:, v] >= 0
+                _, inverse, n = np.unique(new_blob[taken, v], return_inverse=True, return_counts=True)
+                new_blob[np.flatnonzero(taken)[n[inverse] > 1], v] = -1
+            mirror = np.argmax(new_blob[:, 1:] >= 0, axis=1) + 1
+            ok = go & (new_blob[:, 0] >= 0) & (new_blob[:, 1:] >= 0).any(axis=1)
+            rows = np.flatnonzero(ok)
+            point = np.full((frame.size, 3), np.nan)
+            if rows.size:
+                m = mirror[rows]
+                pt, gap_px = _two_rays(_ray(det.norm[0][new_blob[rows, 0]]), _ray(np.stack(
+                    [det.norm[v][b] for v, b in zip(m, new_blob[rows, m])])), normals[m - 1], ds[m - 1], focal_px)
+                meets = (gap_px <= limit) & (np.linalg.norm(pt - last_point[rows], axis=1)
+                                             <= settings.gate_mm * (1 + coast[rows]))
+                predicted = last_point[rows] + vel3[rows] * (1 + coast[rows, None])
+                meets &= _alone_on_its_ray(cands, new_blob[rows, 0], pt, predicted)
+                # as surprising along each view's ray as across it (the mirror's ray in real space, eq. 3.9)
+                mirror_ray = _ray(np.stack([det.norm[v][b] for v, b in zip(m, new_blob[rows, m])]))
+                n_m = normals[m - 1]
+                mirror_ray = mirror_ray - 2.0 * np.sum(mirror_ray * n_m, axis=1, keepdims=True) * n_m
+                for ray in (_ray(det.norm[0][new_blob[rows, 0]]), mirror_ray):
+                    meets &= _surprise_matches(pt - predicted, ray)
+                point[rows[meets]] = pt[meets]
+                ok[rows[~meets]] = False
+            rows = np.flatnonzero(ok)
+            gf, mk = g[rows], marker[rows]
+            result.points[gf, mk] = point[rows]
+            result.head_frame[gf, mk] = np.einsum("mji,mj->mi", R[gf], point[rows] - result.head_pose[gf, 3:])
+            result.conjectured[gf, mk] = False
+            result.camera_mask[gf, mk] = 1 | (1 << mirror[rows])
+            result.assigned_blob[gf, mk] = new_blob[rows, 0] - det.start[0][gf]
+            measured[gf, mk] = True
+            np.add.at(per_frame, gf, 1)
+            for v in range(K + 1):
+                b = new_blob[rows, v]
+                claimed[v][b[b >= 0]] = True
+            # carry on: a chain measured here from the blobs found (views not found are dropped), one
+            # that found nothing coasts on its velocity for up to MAX_COAST frames (a dot merged with a
+            # neighbour's or missed for a frame or two), its gate growing with the frames coasted
+            coasting = go & ~ok & (coast < MAX_COAST)
+            keep = ok | coasting
+            if not keep.any():
+                break
+            found = np.stack([pixels(v, new_blob[:, v]) for v in range(K + 1)], axis=1)
+            vel = np.where(ok[:, None, None], np.where(np.isfinite(found), found - pos, 0.0), vel)
+            pos = np.where(ok[:, None, None], found, pos + vel)
+            alive = np.where(ok[:, None], np.isfinite(found[..., 0]), alive)
+            vel3 = np.where(ok[:, None], (point - last_point) / (1 + coast[:, None]), vel3)
+            coast = np.where(ok, 0, coast + 1)
+            last_point = np.where(ok[:, None], point, last_point)
+            frame, marker, colour = g[keep], marker[keep], colour[keep]
+            pos, vel, alive, coast, last_point = pos[keep], vel[keep], alive[keep], coast[keep], last_point[keep]
+            vel3 = vel3[keep]
+    return per_frame

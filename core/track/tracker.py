@@ -43,7 +43,7 @@ from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
 from .late import add_late_markers, merge_split_labels
-from .singleview import measure_in_single_views
+from .singleview import follow_dots_through_gaps, measure_in_single_views
 from .motion import (
     RELATION_CORRELATION,
     ConstantVelocityKalman,
@@ -262,13 +262,11 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     result = merge_split_labels(result, s)
     lap("final_pass")
+    if s.single_views:
+        follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s)
     conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
-        found = measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected,
-                                        s.band_px, 3 * s.min_measured_frames)
-        result.stats["measured_in_one_view"] = found["one_view"]
-        result.stats["measured_in_two_views_after_gap_fill"] = found["two_views"]
-        result.stats["conjectured"] = result.conjectured.sum(axis=1)
+        measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s)
     lap("gap_fill")
     result.undecided = _still_undecided(undecided, result)
     result.timings = timings
