@@ -80,6 +80,16 @@ def _on_ray(point, ray):
     return ray * np.sum(point * ray, axis=-1, keepdims=True)
 
 
+def _mirror_norm(det: ClipDetections, mirror, blob) -> np.ndarray:
+    """Normalised image points ``(n, 2)`` of ``blob`` (global indices) in each row's ``mirror``
+    view (1..K), gathered view by view."""
+    out = np.full((len(blob), 2), np.nan)
+    for v in np.unique(mirror):
+        rows = mirror == v
+        out[rows] = det.norm[v][blob[rows]]
+    return out
+
+
 def _two_rays(a, b_virtual, normals, ds, focal_px: float):
     """The point nearest the direct ray ``a (n, 3)`` and the ray of a mirror image ``b_virtual
     (n, 3)`` (camera rays, unit) of mirrors ``normals (n, 3)``, ``ds (n,)``: in real space the
@@ -111,7 +121,7 @@ def _meeting_limit(result: TrackResult, det: ClipDetections, cands, normals, ds,
     ok = (mb >= 0) & (direct >= 0)
     if not ok.any():
         return np.inf
-    _, gap = _two_rays(_ray(det.norm[0][direct[ok]]), _ray(np.stack([det.norm[v + 1][b] for v, b in zip(k[ok], mb[ok])])),
+    _, gap = _two_rays(_ray(det.norm[0][direct[ok]]), _ray(_mirror_norm(det, k[ok] + 1, mb[ok])),
                        normals[k[ok]], ds[k[ok]], focal_px)
     return float(np.nanpercentile(gap, MEETING_PERCENTILE))
 
@@ -157,16 +167,6 @@ def _alone_on_its_ray(cands, direct_blob, point, predicted) -> np.ndarray:
     return np.bincount(row[rival], minlength=direct_blob.size) == 0
 
 
-def _typical_spacing(det: ClipDetections, view: int, focal_px: float, sample: int = 20000) -> float:
-    """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,
-    of any colour, over up to ``sample`` blobs."""
-    xy = _tree_points(det.norm[view], det.frame[view], np.zeros(len(det.frame[view])), focal_px)
-    if len(xy) < 2:
-        return np.inf
-    d, _ = cKDTree(xy).query(xy[:: max(1, len(xy) // sample)], k=2)
-    return float(np.median(d[:, 1]))
-
-
 def _surprise_matches(surprise, ray) -> np.ndarray:
     """Whether a chain's step is as surprising along ``ray`` (unit, ``(n, 3)``) as across it: the
     component of ``surprise`` (the point less its prediction, mm) along the ray is at most
@@ -176,6 +176,18 @@ def _surprise_matches(surprise, ray) -> np.ndarray:
     along = np.sum(surprise * ray, axis=1)
     across = np.linalg.norm(surprise - along[:, None] * ray, axis=1)
     return np.abs(along) <= DEPTH_RATIO * across + DEPTH_SLACK_MM
+
+
+def _typical_spacing(det: ClipDetections, view: int, focal_px: float, frames: int = 20) -> float:
+    """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,
+    of any colour, over ``frames`` frames spread over the clip."""
+    chosen = np.unique(np.linspace(0, det.n_frames - 1, frames).astype(int))
+    pick = np.isin(det.frame[view], chosen)
+    if pick.sum() < 2:
+        return np.inf
+    xy = _tree_points(det.norm[view][pick], det.frame[view][pick], np.zeros(int(pick.sum())), focal_px)
+    d, _ = cKDTree(xy).query(xy, k=2)
+    return float(np.median(d[:, 1]))
 
 
 def _claimed(result: TrackResult, det: ClipDetections, cands, view: int) -> np.ndarray:
@@ -434,14 +446,14 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
             point = np.full((frame.size, 3), np.nan)
             if rows.size:
                 m = mirror[rows]
-                pt, gap_px = _two_rays(_ray(det.norm[0][new_blob[rows, 0]]), _ray(np.stack(
-                    [det.norm[v][b] for v, b in zip(m, new_blob[rows, m])])), normals[m - 1], ds[m - 1], focal_px)
+                mirror_ray = _ray(_mirror_norm(det, m, new_blob[rows, m]))
+                pt, gap_px = _two_rays(_ray(det.norm[0][new_blob[rows, 0]]), mirror_ray, normals[m - 1], ds[m - 1],
+                                       focal_px)
                 meets = (gap_px <= limit) & (np.linalg.norm(pt - last_point[rows], axis=1)
                                              <= settings.gate_mm * (1 + coast[rows]))
                 predicted = last_point[rows] + vel3[rows] * (1 + coast[rows, None])
                 meets &= _alone_on_its_ray(cands, new_blob[rows, 0], pt, predicted)
                 # as surprising along each view's ray as across it (the mirror's ray in real space, eq. 3.9)
-                mirror_ray = _ray(np.stack([det.norm[v][b] for v, b in zip(m, new_blob[rows, m])]))
                 n_m = normals[m - 1]
                 mirror_ray = mirror_ray - 2.0 * np.sum(mirror_ray * n_m, axis=1, keepdims=True) * n_m
                 for ray in (_ray(det.norm[0][new_blob[rows, 0]]), mirror_ray):
