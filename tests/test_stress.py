@@ -105,8 +105,8 @@ def test_later_chains_of_a_marker_merge_back_into_it(tmp_path, capsys):
     print(f"motion clip: {report['per_frame']['merged_labels'][0]} labels merged, {s['split_markers']} split left, "
           f"{s['identity_switches']} switches, {100 * s['seen_reported_fraction']:.2f} % reported")
     assert report["per_frame"]["merged_labels"][0] >= 2 and s["split_markers"] <= 2
-    # 98.0 % reported with the dots followed through gaps (core.track.singleview; 94.9 % before)
-    assert s["identity_switches"] == 0 and s["rms_mm"] < 0.2 and s["seen_reported_fraction"] > 0.975
+    # 98.4 % reported with the dots followed through gaps (core.track.singleview; 94.9 % before)
+    assert s["identity_switches"] == 0 and s["rms_mm"] < 0.2 and s["seen_reported_fraction"] > 0.98
 
 
 def test_the_clips_visibility_truth_matches_what_the_detector_finds(tmp_path, capsys):

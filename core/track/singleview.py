@@ -449,9 +449,9 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
                 mirror_ray = _ray(_mirror_norm(det, m, new_blob[rows, m]))
                 pt, gap_px = _two_rays(_ray(det.norm[0][new_blob[rows, 0]]), mirror_ray, normals[m - 1], ds[m - 1],
                                        focal_px)
-                meets = (gap_px <= limit) & (np.linalg.norm(pt - last_point[rows], axis=1)
-                                             <= settings.gate_mm * (1 + coast[rows]))
+                # within the tracker's gate of where the marker's 3D velocity puts it
                 predicted = last_point[rows] + vel3[rows] * (1 + coast[rows, None])
+                meets = (gap_px <= limit) & (np.linalg.norm(pt - predicted, axis=1) <= settings.gate_mm * (1 + coast[rows]))
                 meets &= _alone_on_its_ray(cands, new_blob[rows, 0], pt, predicted)
                 # as surprising along each view's ray as across it (the mirror's ray in real space, eq. 3.9)
                 n_m = normals[m - 1]
