@@ -258,6 +258,16 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
         order = np.argsort(d)
         if d[order[0]] <= MERGE_MM and (d.size == 1 or d[order[1]] > 2.0 * MERGE_MM):
             pairs.append((cands[order[0]], b))
+    return merge_labels(result, pairs)
+
+
+def merge_labels(result: TrackResult, pairs) -> TrackResult:
+    """Each ``(a, b)`` of ``pairs``: label ``b``'s measurements become label ``a``'s and ``b`` goes
+    (two labels of one dot, never measured in the same frame); a label already merged away is
+    skipped. ``stats["merged_labels"]`` counts the labels gone."""
+    measured = result.assigned_blob >= 0
+    N = measured.shape[1]
+    result.stats["merged_labels"] = result.stats.get("merged_labels", np.zeros(1, int)).copy()
     if not pairs:
         return result
     keep = np.ones(N, bool)
@@ -273,7 +283,7 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
         if result.candidate is not None:
             result.candidate[take, a] = result.candidate[take, b]
         keep[b] = False
-    result.stats["merged_labels"] = np.array([int((~keep).sum())])
+    result.stats["merged_labels"] = result.stats["merged_labels"] + int((~keep).sum())
     idx = np.flatnonzero(keep)
     out = replace(result, labels=[result.labels[i] for i in idx], points=result.points[:, idx],
                   conjectured=result.conjectured[:, idx], camera_mask=result.camera_mask[:, idx],

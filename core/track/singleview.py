@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from ..capture.views import ClipDetections
 from ..geometry.mirror import reflect_points
 from ..geometry.rigid import rotation_zyx
+from .late import merge_labels
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings
 
 MAX_GATE_PX = 2.5        # the largest distance (pixels) from the predicted image to the blob taken
@@ -349,8 +350,8 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
     return counts
 
 
-def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                             settings: TrackSettings) -> np.ndarray:
+def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
+                 settings: TrackSettings, per_frame) -> list:
     """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
     ends. From the last frame a marker was measured in (and backwards from the next), its direct
     blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
@@ -370,18 +371,21 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
     A chain that finds nothing coasts on its velocity for up to :data:`MAX_COAST` frames; a blob
     two chains reach in one frame stops both. Identity comes from the dots' continuity, not from
     the neighbours: this reaches markers whose expression outran the passes' gate and the
-    conjecture (fast lips). Updates ``result`` in place; returns the cells measured per frame
-    (``stats["followed_through_gaps"]``)."""
+    conjecture (fast lips).
+
+    A chain whose next dot is another label's measurement there -- a label never measured in
+    the same frame as this one, its point within the gate of this one's prediction -- has found the
+    same dot under a second label (a split): it votes ``(this, other)``. Updates ``result`` in
+    place, adds the cells measured to ``per_frame``; returns the votes."""
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
     F, N = result.assigned_blob.shape
     measured = result.assigned_blob >= 0
-    per_frame = np.zeros(F, int)
-    result.stats["followed_through_gaps"] = per_frame
     settled = measured.sum(axis=0) >= SETTLED_FACTOR * settings.min_measured_frames
+    votes = []
     if K == 0 or not settled.any():
-        return per_frame
+        return votes
     limit = min(settings.band_px, _meeting_limit(result, det, cands, normals, ds, focal_px))
     trees = [cKDTree(_tree_points(det.norm[v], det.frame[v], det.colour[v], focal_px)) for v in range(K + 1)]
     # the search radius in each view: at most SPACING_SHARE of the dots' typical spacing there
@@ -392,6 +396,9 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
     blobs[f, i, 0] = result.assigned_blob[f, i] + det.start[0][f]
     c = result.candidate[f, i]
     blobs[f[c >= 0], i[c >= 0], 1:] = cands.mirror_blob[c[c >= 0]]
+    owner = np.full(len(det.frame[0]), -1)             # the label measured from each direct blob
+    owner[blobs[f, i, 0]] = i
+    together = (measured.T.astype(np.int32) @ measured.astype(np.int32)) > 0    # labels measured in one frame
     R = rotation_zyx(result.head_pose[:, :3])
 
     def pixels(v, b):
@@ -434,8 +441,16 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
                 pred = (pos[want, v] + vel[want, v]) / focal_px
                 d, j = trees[v].query(_tree_points(pred, g[want], colour[want], focal_px), k=2)
                 j0 = np.minimum(j[:, 0], len(det.frame[v]) - 1)
-                ok = (d[:, 0] <= radius[v]) & (d[:, 1] >= LINK_RATIO * d[:, 0]) & ~claimed[v][j0]
+                linked = (d[:, 0] <= radius[v]) & (d[:, 1] >= LINK_RATIO * d[:, 0])
+                ok = linked & ~claimed[v][j0]
                 new_blob[np.flatnonzero(want)[ok], v] = j0[ok]
+                if v == 0:   # the dot is another label's measurement: a split, if they never meet
+                    a, b = marker[want], owner[j0]
+                    split = linked & (b >= 0) & (b != a) & ~together[a, np.maximum(b, 0)]
+                    ahead = last_point[want] + vel3[want] * (1 + coast[want, None])
+                    split &= (np.linalg.norm(result.points[g[want], np.maximum(b, 0)] - ahead, axis=1)
+                              <= settings.gate_mm * (1 + coast[want]))
+                    votes.extend(zip(a[split].tolist(), b[split].tolist()))
             for v in range(K + 1):                    # a blob two chains reach goes to neither
                 taken = new_blob[:, v] >= 0
                 _, inverse, n = np.unique(new_blob[taken, v], return_inverse=True, return_counts=True)
@@ -468,6 +483,7 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
             result.camera_mask[gf, mk] = 1 | (1 << mirror[rows])
             result.assigned_blob[gf, mk] = new_blob[rows, 0] - det.start[0][gf]
             measured[gf, mk] = True
+            owner[new_blob[rows, 0]] = mk
             np.add.at(per_frame, gf, 1)
             for v in range(K + 1):
                 b = new_blob[rows, v]
@@ -489,4 +505,29 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
             frame, marker, colour = g[keep], marker[keep], colour[keep]
             pos, vel, alive, coast, last_point = pos[keep], vel[keep], alive[keep], coast[keep], last_point[keep]
             vel3 = vel3[keep]
-    return per_frame
+    return votes
+
+
+def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
+                             settings: TrackSettings) -> TrackResult:
+    """Each marker's dots followed into its gaps (:func:`_follow_once`); labels found to be one
+    dot (a chain that reaches the other's measurement, the two never measured in the same frame)
+    merged, the earlier-seen label keeping the other's measurements
+    (:func:`.late.merge_labels`), and the merged markers' gaps followed once more. Returns the
+    result (a new one when labels merged); ``stats["followed_through_gaps"]`` counts the cells
+    measured per frame."""
+    per_frame = np.zeros(result.assigned_blob.shape[0], int)
+    result.stats["followed_through_gaps"] = per_frame
+    for _ in range(2):
+        votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, per_frame)
+        measured = result.assigned_blob >= 0
+        first = np.argmax(measured, axis=0)
+        pairs = []
+        for a, b in sorted(set(votes)):
+            if (measured[:, a] & measured[:, b]).any():
+                continue
+            pairs.append((a, b) if first[a] <= first[b] else (b, a))
+        if not pairs:
+            break
+        result = merge_labels(result, list(dict.fromkeys(pairs)))
+    return result

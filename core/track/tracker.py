@@ -263,7 +263,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = merge_split_labels(result, s)
     lap("final_pass")
     if s.single_views:
-        follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s)
+        result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s)
     conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
         measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s)
