@@ -58,6 +58,7 @@ LINK_RATIO = 2.0         # the next nearest blob this much further off,
 RIVAL_MM = 1.0           # any other 3D candidate on the direct ray LINK_RATIO times further from the prediction + this,
 DEPTH_RATIO = 2.0        # the step's surprise along each view's ray at most this times the one across it
 DEPTH_SLACK_MM = 0.5     # plus this;
+FOLLOW_ROUNDS = 2        # rounds of following: a second starts where the first stopped, after merges
 MAX_COAST = 3            # a chain that finds no dot coasts on its velocity this many frames at most
 
 
@@ -351,7 +352,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
 
 
 def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                 settings: TrackSettings, per_frame) -> list:
+                 settings: TrackSettings, per_frame, only=None) -> list:
     """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
     ends. From the last frame a marker was measured in (and backwards from the next), its direct
     blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
@@ -376,13 +377,16 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     A chain whose next dot is another label's measurement there -- a label never measured in
     the same frame as this one, its point within the gate of this one's prediction -- has found the
     same dot under a second label (a split): it votes ``(this, other)``. Updates ``result`` in
-    place, adds the cells measured to ``per_frame``; returns the votes."""
+    place, adds the cells measured to ``per_frame``; returns the votes. ``only``: the markers to
+    follow (default: every settled one)."""
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
     F, N = result.assigned_blob.shape
     measured = result.assigned_blob >= 0
     settled = measured.sum(axis=0) >= SETTLED_FACTOR * settings.min_measured_frames
+    if only is not None:
+        settled &= np.isin(np.arange(N), only)
     votes = []
     if K == 0 or not settled.any():
         return votes
@@ -510,15 +514,16 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
 
 def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
                              settings: TrackSettings) -> TrackResult:
-    """Each marker's dots followed into its gaps (:func:`_follow_once`); labels found to be one
-    dot (a chain that reaches the other's measurement, the two never measured in the same frame)
-    merged, the earlier-seen label keeping the other's measurements
-    (:func:`.late.merge_labels`), and the merged markers' gaps followed once more. Returns the
-    result (a new one when labels merged); ``stats["followed_through_gaps"]`` counts the cells
-    measured per frame."""
+    """Each marker's dots followed into its gaps (:func:`_follow_once`), in :data:`FOLLOW_ROUNDS`
+    rounds (a second starts again where a chain stopped -- two chains that reached one blob, a
+    chain that coasted out -- and follows the merged markers' new gaps); after each, labels found
+    to be one dot (a chain that reaches the other's measurement, the two never measured in the
+    same frame) are merged, the earlier-seen label keeping the other's measurements
+    (:func:`.late.merge_labels`). Returns the result (a new one when labels merged);
+    ``stats["followed_through_gaps"]`` counts the cells measured per frame."""
     per_frame = np.zeros(result.assigned_blob.shape[0], int)
     result.stats["followed_through_gaps"] = per_frame
-    for _ in range(2):
+    for _ in range(FOLLOW_ROUNDS):
         votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, per_frame)
         measured = result.assigned_blob >= 0
         first = np.argmax(measured, axis=0)
@@ -527,7 +532,6 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
             if (measured[:, a] & measured[:, b]).any():
                 continue
             pairs.append((a, b) if first[a] <= first[b] else (b, a))
-        if not pairs:
-            break
-        result = merge_labels(result, list(dict.fromkeys(pairs)))
+        if pairs:
+            result = merge_labels(result, list(dict.fromkeys(pairs)))
     return result
