@@ -128,13 +128,22 @@ def _meeting_limit(result: TrackResult, det: ClipDetections, cands, normals, ds,
     return float(np.nanpercentile(gap, MEETING_PERCENTILE))
 
 
+def _blob_tree(det: ClipDetections, view: int, focal_px: float) -> cKDTree:
+    """The KD-tree of every blob of ``view`` (:func:`_tree_points`), built once per clip and view."""
+    cache = det.__dict__.setdefault("_singleview_trees", {})
+    key = (view, float(focal_px))
+    if key not in cache:
+        cache[key] = cKDTree(_tree_points(det.norm[view], det.frame[view], det.colour[view], focal_px))
+    return cache[key]
+
+
 def _lasts(det: ClipDetections, view: int, blob, pred, frame, marker, colour, result: TrackResult, conjecture,
            normals, ds, focal_px: float) -> np.ndarray:
     """Whether each blob taken for a cell is a lasting dot: in the frame before or after, a blob of
     the same colour in the same view lies within :data:`CONTINUITY_PX` of where the marker is
     then (its reported point, else its conjecture) plus the same offset from its prediction."""
     F = det.n_frames
-    all_blobs = cKDTree(_tree_points(det.norm[view], det.frame[view], det.colour[view], focal_px))
+    all_blobs = _blob_tree(det, view, focal_px)
     offset = det.norm[view][blob] - pred
     lasts = np.zeros(blob.size, bool)
     for step in (-1, 1):
@@ -261,7 +270,9 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
         others, oz = _image(everywhere[f_r, i_r], v, normals, ds)
         seen = np.all(np.isfinite(others), axis=1) & (oz > 0)
         other_tree = cKDTree(_tree_points(others[seen], f_r[seen], result.colour[i_r[seen]] * 0, focal_px))
-        d_other, j_other = other_tree.query(_tree_points(pred, f_c, colour * 0, focal_px), k=2)
+        d_other, j_other = other_tree.query(_tree_points(np.where(ok[:, None], pred, 0.0), f_c, colour * 0, focal_px),
+                                            k=2, distance_upper_bound=MAX_GATE_PX / SPACING_SHARE + 1.0)
+        j_other = np.minimum(j_other, max(int(seen.sum()) - 1, 0))
         own = (f_r[seen][j_other[:, 0]] == f_c) & (i_r[seen][j_other[:, 0]] == i_c)
         nearest_other = np.where(own, d_other[:, 1], d_other[:, 0])
         gate = np.minimum(gate, SPACING_SHARE * nearest_other)
@@ -276,7 +287,8 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
         # the blob must be clearly this marker's: much nearer its image than any other marker's
         b = idx[np.minimum(j, idx.size - 1)]
         blob_xy = _tree_points(det.norm[v][b], det.frame[v][b], np.zeros(b.size), focal_px)
-        d_b, j_b = other_tree.query(blob_xy, k=2)
+        d_b, j_b = other_tree.query(blob_xy, k=2, distance_upper_bound=AMBIGUITY_RATIO * MAX_GATE_PX + 1.0)
+        j_b = np.minimum(j_b, max(int(seen.sum()) - 1, 0))
         own_b = (f_r[seen][j_b[:, 0]] == f_c) & (i_r[seen][j_b[:, 0]] == i_c)
         hit &= np.where(own_b, d_b[:, 1], d_b[:, 0]) >= AMBIGUITY_RATIO * d
         # ... and a dot that lasts: a stray blob (a glint, a tooth) seldom sits where the marker is two frames running
@@ -352,7 +364,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
 
 
 def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                 settings: TrackSettings, per_frame, only=None) -> list:
+                 settings: TrackSettings, per_frame, only=None, tried=None) -> list:
     """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
     ends. From the last frame a marker was measured in (and backwards from the next), its direct
     blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
@@ -378,7 +390,8 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     the same frame as this one, its point within the gate of this one's prediction -- has found the
     same dot under a second label (a split): it votes ``(this, other)``. Updates ``result`` in
     place, adds the cells measured to ``per_frame``; returns the votes. ``only``: the markers to
-    follow (default: every settled one)."""
+    follow (default: every settled one); ``tried``: a set of the chain starts tried before (frame,
+    marker, direction), skipped and added to."""
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
@@ -391,7 +404,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     if K == 0 or not settled.any():
         return votes
     limit = min(settings.band_px, _meeting_limit(result, det, cands, normals, ds, focal_px))
-    trees = [cKDTree(_tree_points(det.norm[v], det.frame[v], det.colour[v], focal_px)) for v in range(K + 1)]
+    trees = [_blob_tree(det, v, focal_px) for v in range(K + 1)]
     # the search radius in each view: at most SPACING_SHARE of the dots' typical spacing there
     radius = np.array([min(LINK_PX, SPACING_SHARE * _typical_spacing(det, v, focal_px)) for v in range(K + 1)])
     claimed = [_claimed(result, det, cands, v) for v in range(K + 1)]
@@ -402,7 +415,8 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     blobs[f[c >= 0], i[c >= 0], 1:] = cands.mirror_blob[c[c >= 0]]
     owner = np.full(len(det.frame[0]), -1)             # the label measured from each direct blob
     owner[blobs[f, i, 0]] = i
-    together = (measured.T.astype(np.int32) @ measured.astype(np.int32)) > 0    # labels measured in one frame
+    m32 = measured.astype(np.float32)
+    together = (m32.T @ m32) > 0.5                     # labels measured in one frame (BLAS: float)
     R = rotation_zyx(result.head_pose[:, :3])
 
     def pixels(v, b):
@@ -414,6 +428,11 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
         edge = np.zeros(F, bool)
         edge[-1 if step == 1 else 0] = True
         frame, marker = np.nonzero(measured & ~nxt & ~edge[:, None] & settled[None])
+        if tried is not None:   # a start tried in an earlier round, whose gap nothing changed, fails again
+            key = (frame * N + marker) * 2 + (step > 0)
+            fresh = ~np.isin(key, tried)
+            tried.update(key.tolist())
+            frame, marker = frame[fresh], marker[fresh]
         before = frame - step
         prev_ok = (before >= 0) & (before < F)
         before = np.clip(before, 0, F - 1)
@@ -443,7 +462,8 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
                 if not want.any():
                     continue
                 pred = (pos[want, v] + vel[want, v]) / focal_px
-                d, j = trees[v].query(_tree_points(pred, g[want], colour[want], focal_px), k=2)
+                d, j = trees[v].query(_tree_points(pred, g[want], colour[want], focal_px), k=2,
+                                      distance_upper_bound=LINK_RATIO * radius[v] + 1.0)
                 j0 = np.minimum(j[:, 0], len(det.frame[v]) - 1)
                 linked = (d[:, 0] <= radius[v]) & (d[:, 1] >= LINK_RATIO * d[:, 0])
                 ok = linked & ~claimed[v][j0]
@@ -523,8 +543,9 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
     ``stats["followed_through_gaps"]`` counts the cells measured per frame."""
     per_frame = np.zeros(result.assigned_blob.shape[0], int)
     result.stats["followed_through_gaps"] = per_frame
+    tried = set()
     for _ in range(FOLLOW_ROUNDS):
-        votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, per_frame)
+        votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, per_frame, tried=tried)
         measured = result.assigned_blob >= 0
         first = np.argmax(measured, axis=0)
         pairs = []
@@ -532,6 +553,7 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
             if (measured[:, a] & measured[:, b]).any():
                 continue
             pairs.append((a, b) if first[a] <= first[b] else (b, a))
-        if pairs:
+        if pairs:   # labels renumbered: every start is new again
             result = merge_labels(result, list(dict.fromkeys(pairs)))
+            tried = set()
     return result
