@@ -156,7 +156,9 @@ def track(args) -> int:
         pf = report["per_frame"]
         n = report["frames"]["count"]
         print(f"{report['markers']['count']} markers over {n} frames -> {args.output} [{report['units']}]")
-        print(f"  per frame: {np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured, "
+        followed = np.mean(pf["followed_through_gaps"]) if "followed_through_gaps" in pf else 0.0
+        print(f"  per frame: {np.mean(pf['measured']):.1f} measured ({followed:.1f} of them followed through gaps), "
+              f"{np.mean(pf['conjectured']):.1f} conjectured, "
               f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts, "
               f"{np.mean(pf['withheld']):.1f} conjectures withheld; "
               f"tracking {report['timings_s']['tracking_frames_per_s']:.0f} frames/s")

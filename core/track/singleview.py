@@ -360,6 +360,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
     result.stats["measured_in_one_view"] = counts["one_view"]
     result.stats["measured_in_two_views_after_gap_fill"] = counts["two_views"]
     result.stats["conjectured"] = result.conjectured.sum(axis=1)
+    result.stats["measured"] = (result.assigned_blob >= 0).sum(axis=1)   # the take's, these steps' included
     return counts
 
 
