@@ -129,7 +129,8 @@ def _meeting_limit(result: TrackResult, det: ClipDetections, cands, normals, ds,
 
 
 def _blob_tree(det: ClipDetections, view: int, focal_px: float) -> cKDTree:
-    """The KD-tree of every blob of ``view`` (:func:`_tree_points`), built once per clip and view."""
+    """The KD-tree of every blob of ``view`` (:func:`_tree_points`), built once per clip and view
+    (kept with the clip's detections, which do not change once ingested)."""
     cache = det.__dict__.setdefault("_singleview_trees", {})
     key = (view, float(focal_px))
     if key not in cache:
@@ -226,9 +227,10 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
                             conjecture, expected_sd, settings: TrackSettings) -> dict:
     """Measure the gap cells of ``result`` from unclaimed blobs (module text).
     ``conjecture (F, N, 3)``: every gap cell's conjectured camera-frame point, withheld or not
-    (NaN elsewhere); ``expected_sd (F, N)``: its expected 3D error (mm); ``band_px``: the
-    tracker's epipolar band (the rays of a two-view cell meet closer than this); markers
-    measured in fewer than ``min_frames`` frames are left alone. Updates ``points``,
+    (NaN elsewhere); ``expected_sd (F, N)``: its expected 3D error (mm). From ``settings``: the
+    epipolar band ``band_px`` (the rays of a two-view cell meet closer than this) and
+    ``min_measured_frames`` (markers measured in fewer than :data:`SETTLED_FACTOR` times as many
+    frames are left alone). Updates ``points``,
     ``head_frame``, ``conjectured``, ``camera_mask`` and ``assigned_blob`` in place; returns the
     cells measured per frame, ``{"two_views": (F,), "one_view": (F,)}``."""
     band_px, min_frames = settings.band_px, SETTLED_FACTOR * settings.min_measured_frames
