@@ -78,6 +78,7 @@ def _render_preview(objects, frames: int, fps: float, path: Path) -> None:
         bsdf.inputs["Base Color"].default_value = (0.62, 0.47, 0.42, 1.0)
         bsdf.inputs["Roughness"].default_value = 0.6
     centres = []
+    bpy.context.view_layer.update()   # matrix_world of objects placed this run (the character's offset)
     for obj in objects:
         obj.data.materials.append(skin)
         co = np.empty(len(obj.data.vertices) * 3, np.float32)
@@ -88,8 +89,8 @@ def _render_preview(objects, frames: int, fps: float, path: Path) -> None:
     cam_data.lens = 50.0
     cam = bpy.data.objects.new("preview_camera", cam_data)
     bpy.context.scene.collection.objects.link(cam)
-    # 650 mm in front of the face, looking at it (Blender: the face looks down -Y)
-    cam.location = centre_b[:3] + core_to_blender(np.array([0.0, 0.0, -650.0]))
+    # 800 mm in front of the faces, looking at them (Blender: the face looks down -Y): both heads in frame
+    cam.location = centre_b[:3] + core_to_blender(np.array([0.0, 0.0, -800.0]))
     cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
     scene.camera = cam
     lamp = bpy.data.lights.new("preview_key", "AREA")
