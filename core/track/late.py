@@ -20,7 +20,7 @@ from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
                       focal_px: float, link_mm: float = 1.0, link_frames: int = 3, min_frames: int = 5,
                       same_marker_mm: float = 4.0, same_ray_px: float = 2.0, min_support: float = 0.6,
-                      max_rms_factor: float = 2.0, off_face_mm: float = 10.0, return_chains: bool = False):
+                      max_rms_factor: float = 2.0, off_face_mm: float = 10.0):
     """Markers the initial window missed (hidden at the start, turned into view later).
 
     Candidates the first pass left alone -- their direct blob and their mirror blobs
@@ -42,8 +42,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     neutral position where it was first seen, less its neighbours' motion then
     (:func:`_motion_near`), and is measured from the first frame of its chains on
     (before, its position is only a conjecture, and a false blob near that would be
-    taken for it). With ``return_chains``, also each added marker's candidates (clip candidate
-    indices, every stretch of it), in the order of the markers added."""
+    taken for it)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -61,9 +60,8 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
         mb = cands.mirror_blob[:, k]
         free &= (mb < 0) | ~taken[k + 1][np.maximum(mb, 0)]
     idx = np.flatnonzero(free)
-    none = (markers, []) if return_chains else markers
     if idx.size < min_frames:
-        return none
+        return markers
     f = cands.frame[idx]
     pose = first_pass.head_pose[f]
     R = rotation_zyx(pose[:, :3])  # (M, 3, 3)
@@ -86,7 +84,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     good = np.flatnonzero((support >= min_frames) & (support >= min_support * (last_f - first_f + 1))
                           & (rms <= max_rms_factor * true_rms))
     if good.size == 0:
-        return none
+        return markers
     # a chain that mostly runs along an existing marker is that marker: near it in 3D (frames
     # the first pass missed it in), or on its image (its direct blob with a wrong mirror blob).
     # Markers that will not earn their place (wrong pairings, lost for good) do not count.
@@ -100,7 +98,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     near_existing = np.bincount(comp[member], (d <= same_marker_mm) | (d_px <= same_ray_px), minlength=n_comp)
     good = good[near_existing[good] < 0.5 * np.bincount(comp[member], minlength=n_comp)[good]]
     if good.size == 0:
-        return none
+        return markers
     # one blob is one marker: chains sharing a blob (a marker's chain and its chance
     # pairings with another unclaimed blob) compete, and the best supported one wins
     cand_of = idx[member]
@@ -117,7 +115,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     q_of = entry_of[good]
     at_rest = np.full((n_comp, 3), np.nan)
     at_rest[good] = head[q_of] - _motion_near(first_pass, real, head[q_of], f[q_of], s.neighbour_radius_mm)
-    keep, seen_from, stretches = [], {}, {}
+    keep, seen_from = [], {}
     for c in good[np.argsort(-support[good], kind="stable")]:  # the chains left (tens), best supported first
         rows = by_chain[bounds[c]:bounds[c + 1]]
         blobs = [key[rows] for key in blob_keys]
@@ -134,19 +132,16 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
             if gap.min() <= same_marker_mm:  # another stretch of a marker kept: it is seen from then
                 same = keep[int(np.argmin(gap))]
                 seen_from[same] = min(seen_from[same], first_f[c])
-                stretches[same].append(cand_of[rows])
                 continue
         for v, b in enumerate(blobs):
             used[v][b[b >= 0]] = True
         keep.append(c)
         seen_from[c] = first_f[c]
-        stretches[c] = [cand_of[rows]]
     keep.sort(key=lambda c: (seen_from[c], entry_of[c]))  # markers in order of appearance
     if not keep:
-        return none
-    out = (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
-           np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
-    return (out, [np.concatenate(stretches[c]) for c in keep]) if return_chains else out
+        return markers
+    return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
+            np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
 
 
 def _off_the_face(neutral, point, off_mm: float, k: int = 6) -> bool:
@@ -300,54 +295,4 @@ def merge_labels(result: TrackResult, pairs) -> TrackResult:
         remap = -np.ones(N, int)
         remap[idx] = np.arange(idx.size)
         out.rigid = remap[np.asarray(result.rigid)][remap[np.asarray(result.rigid)] >= 0]
-    return out
-
-
-CLEAR_OF_LABELS_MM = 6.0   # a marker found after the pass sits at least this far from every label's neutral position
-NEW_MARKER_FACTOR = 2      # ... and is measured in this many times TrackSettings.min_measured_frames
-
-
-def markers_after_the_pass(result: TrackResult, det: ClipDetections, cands: ClipCandidates, s: TrackSettings,
-                           focal_px: float) -> TrackResult:
-    """Late markers found again after the final pass, among the candidates the take leaves
-    unclaimed (:func:`add_late_markers` with the take as the pass): a dot whose direct blob a
-    wrong pairing held in the first pass (with another marker's mirror image, the pairing then
-    dropped by :func:`.result.keep_measured`) was not free then. A new marker must sit
-    :data:`CLEAR_OF_LABELS_MM` from every label's neutral position (nearer, it is a label's own dot
-    in a gap its conjecture lost, not a marker of its own); it is measured where its chain is (one
-    candidate per frame, the smallest band residual) and needs :data:`NEW_MARKER_FACTOR` times
-    ``s.min_measured_frames`` such frames (a shorter chain on a dense face may be a persistent wrong
-    pairing). Its gaps are left to the steps after (followed, conjectured)."""
-    measured = result.assigned_blob >= 0
-    F, N = measured.shape
-    entry = np.where(measured.any(axis=0), np.argmax(measured, axis=0), 0)
-    markers = (result.first_blob, result.neutral, result.colour, entry)
-    (first_blob, neutral, colour, _), chains = add_late_markers(det, cands, s, markers, result, focal_px,
-                                                                return_chains=True)
-    new = []
-    for i, c in enumerate(chains):
-        c = c[np.lexsort((cands.residual_px[c], cands.frame[c]))]
-        c = c[np.r_[True, cands.frame[c][1:] != cands.frame[c][:-1]]]    # one candidate per frame
-        clear = N == 0 or np.min(np.linalg.norm(result.neutral - neutral[N + i], axis=1)) >= CLEAR_OF_LABELS_MM
-        if c.size >= NEW_MARKER_FACTOR * s.min_measured_frames and clear:
-            new.append((N + i, c))
-    result.stats["markers_after_pass"] = np.array([len(new)])
-    if not new:
-        return result
-    rows = np.r_[np.arange(N), [i for i, _ in new]]
-    grow = lambda a, fill: np.concatenate([a, np.full((F, len(new)) + a.shape[2:], fill, a.dtype)], axis=1)
-    out = replace(result, labels=list(result.labels) + [f"m{N + j:03d}" for j in range(len(new))],
-                  points=grow(result.points, np.nan), head_frame=grow(result.head_frame, np.nan),
-                  conjectured=grow(result.conjectured, False), camera_mask=grow(result.camera_mask, 0),
-                  assigned_blob=grow(result.assigned_blob, -1), candidate=grow(result.candidate, -1),
-                  neutral=neutral[rows], first_blob=first_blob[rows], colour=colour[rows])
-    K = cands.mirror_blob.shape[1]
-    for j, (_, c) in enumerate(new):
-        m, f = N + j, cands.frame[c]
-        R = rotation_zyx(result.head_pose[f, :3])
-        out.points[f, m] = cands.points[c]
-        out.head_frame[f, m] = np.einsum("fji,fj->fi", R, cands.points[c] - result.head_pose[f, 3:])
-        out.camera_mask[f, m] = 1 | ((cands.mirror_blob[c] >= 0) * (2 ** np.arange(1, K + 1))[None]).sum(axis=1)
-        out.assigned_blob[f, m] = cands.direct[c] - det.start[0][f]
-        out.candidate[f, m] = c
     return out

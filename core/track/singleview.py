@@ -543,8 +543,9 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
     to be one dot (a chain that reaches the other's measurement, the two never measured in the
     same frame) are merged, the earlier-seen label keeping the other's measurements
     (:func:`.late.merge_labels`). Returns the result (a new one when labels merged);
-    ``stats["followed_through_gaps"]`` counts the cells measured per frame (over every call)."""
-    per_frame = result.stats.setdefault("followed_through_gaps", np.zeros(result.assigned_blob.shape[0], int))
+    ``stats["followed_through_gaps"]`` counts the cells measured per frame."""
+    per_frame = np.zeros(result.assigned_blob.shape[0], int)
+    result.stats["followed_through_gaps"] = per_frame
     tried = set()
     for _ in range(FOLLOW_ROUNDS):
         votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, per_frame, tried=tried)

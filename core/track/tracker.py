@@ -42,7 +42,7 @@ from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
-from .late import add_late_markers, markers_after_the_pass, merge_split_labels
+from .late import add_late_markers, merge_split_labels
 from .singleview import follow_dots_through_gaps, measure_in_single_views
 from .motion import (
     RELATION_CORRELATION,
@@ -263,8 +263,6 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = merge_split_labels(result, s)
     lap("final_pass")
     if s.single_views:
-        result = markers_after_the_pass(follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s),
-                                        det, cands, s, camera.focal_px)
         result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s)
     conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
