@@ -140,3 +140,27 @@ def test_the_clips_visibility_truth_matches_what_the_detector_finds(tmp_path, ca
             seen[v] += vis.sum()
     assert seen.min() > 1000
     assert (found / seen > 0.98).all(), found / seen  # measured 0.9996, 0.991, 0.9988 over the clip
+
+
+def test_the_sample_clip_reports_its_seen_markers(tmp_path, capsys):
+    """#18's completeness target on the sparse 1280x720 clip, as a user runs `mirrorcap track`: >= 99 %
+    of the marker-frames seen in the direct view and a mirror reported (99.4 % measured; 97.5 % before
+    dots were followed through gaps and conjectures measured where seen, core.track.singleview), no
+    identity switch, no point over 2 mm."""
+    from mirrorcap.core.geometry.camera import Camera
+    from mirrorcap.core.take.c3d import read_c3d
+    from mirrorcap.synthetic.evaluate import score_take
+
+    code, out, err = _run(["track", SAMPLE / "clip.mp4", "--camera", SAMPLE / "camera.json", "--rig",
+                           SAMPLE / "rig.json", "-o", tmp_path / "take.c3d"], capsys)
+    assert code == 0, err
+    truth = np.load(SAMPLE / "truth.npz")
+    take = read_c3d(tmp_path / "take.c3d")
+    seen = truth["visible"][:, 0] & (truth["visible"][:, 1] | truth["visible"][:, 2])
+    s = score_take(take["points"], truth["points"], Camera.load(SAMPLE / "camera.json"),
+                   conjectured=take["conjectured"], seen=seen)
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    print(f"sample clip: {100 * s['seen_reported_fraction']:.2f} % reported, never tracked {s['never_tracked']}, "
+          f"{s['identity_switches']} switches, max {np.nanmax(err_mm):.2f} mm")
+    assert s["seen_reported_fraction"] >= 0.99
+    assert s["identity_switches"] == 0 and np.nanmax(err_mm) < 2.0
