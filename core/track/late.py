@@ -266,10 +266,10 @@ def merge_labels(result: TrackResult, pairs) -> TrackResult:
     (two labels of one dot, never measured in the same frame); a label already merged away is
     skipped. ``stats["merged_labels"]`` counts the labels gone."""
     measured = result.assigned_blob >= 0
-    N = measured.shape[1]
     result.stats["merged_labels"] = result.stats.get("merged_labels", np.zeros(1, int)).copy()
     if not pairs:
         return result
+    N = measured.shape[1]
     keep = np.ones(N, bool)
     for a, b in pairs:
         if not keep[a] or not keep[b]:

@@ -33,9 +33,9 @@ class TrackSettings:
     rigid_fraction: float = 0.2  # share of the markers that carry the head pose when none are named
     min_measured_frames: int = 10  # a marker measured in fewer frames is not reported (a chain of chance
     # pairings -- a direct blob with another marker's mirror image -- seldom lasts ten frames)
-    single_views: bool = True  # after gap filling, conjectured markers measured from a blob in one or two views
-    # where their dot is seen after all (core.track.singleview)
     min_measured_fraction: float = 0.25  # ... nor one this rarely measured that is lost for good (see keep_measured)
+    single_views: bool = True  # offline, after the passes: dots followed through gaps and conjectures measured
+    # where their dot is seen after all (core.track.singleview)
 
     @classmethod
     def with_conjecture_limit(cls, limit_mm: float, **kw) -> "TrackSettings":

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..capture.views import ClipDetections
-from ..geometry.mirror import reflect_points
+from ..geometry.mirror import points_from_planes, reflect_points
 from ..geometry.rigid import rotation_zyx
 from .late import merge_labels
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings
@@ -92,40 +92,42 @@ def _mirror_norm(det: ClipDetections, mirror, blob) -> np.ndarray:
     return out
 
 
-def _two_rays(a, b_virtual, normals, ds, focal_px: float):
-    """The point nearest the direct ray ``a (n, 3)`` and the ray of a mirror image ``b_virtual
-    (n, 3)`` (camera rays, unit) of mirrors ``normals (n, 3)``, ``ds (n,)``: in real space the
-    mirror's ray starts at the mirrored camera centre ``2 d u`` along ``H_u b`` (eq. 3.9, 3.12).
-    Returns the midpoint of the two rays' closest points ``(n, 3)`` and how far apart they pass,
-    in pixels at that depth ``(n,)``."""
-    o = 2.0 * ds[:, None] * normals
-    b = b_virtual - 2.0 * np.sum(b_virtual * normals, axis=1, keepdims=True) * normals
-    ab, ao, bo = np.sum(a * b, axis=1), np.sum(a * o, axis=1), np.sum(b * o, axis=1)
-    den = 1.0 - ab ** 2
-    den = np.where(den > 1e-9, den, np.nan)
-    s, u = (ao - ab * bo) / den, (ab * ao - bo) / den          # minimise |s a - (o + u b)|^2
-    on_a, on_b = s[:, None] * a, o + u[:, None] * b
-    pt = 0.5 * (on_a + on_b)
-    return pt, np.linalg.norm(on_a - on_b, axis=1) * focal_px / np.abs(pt[:, 2])
+def _two_rays(direct, mirror_pts, mirror, normals, ds, focal_px: float):
+    """Each row's point from its direct image ``direct (n, 2)`` and its image ``mirror_pts (n, 2)``
+    in mirror ``mirror (n,)`` (0..K-1), normalised coordinates, by eq. 3.10-3.12
+    (:func:`..geometry.mirror.points_from_planes`): the direct estimate and the reflected-back one
+    are where the direct ray and the mirror's ray pass closest. Returns their average ``(n, 3)``
+    and how far apart they are, in pixels at that depth ``(n,)``."""
+    point = np.full((len(direct), 3), np.nan)
+    gap_px = np.full(len(direct), np.nan)
+    for k in np.unique(mirror):
+        rows = mirror == k
+        fused, on_direct, on_mirror = points_from_planes(direct[rows], mirror_pts[rows][None], normals[k][None],
+                                                         ds[k:k + 1], return_views=True)
+        point[rows] = fused
+        gap_px[rows] = np.linalg.norm(on_direct - on_mirror[0], axis=1) * focal_px / np.abs(fused[:, 2])
+    return point, gap_px
 
 
-def _meeting_limit(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float) -> float:
-    """How closely the direct and mirror rays of the take's measured markers meet (pixels): the
-    :data:`MEETING_PERCENTILE` th percentile over up to :data:`MEETING_SAMPLE` measured cells
-    with a mirror image -- the clip's own detection noise."""
+def meeting_limit(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
+                  band_px: float) -> float:
+    """How closely two rays must meet (pixels) for the steps here to take them as one dot: as
+    closely as the direct and mirror rays of the passes' measured markers do -- the
+    :data:`MEETING_PERCENTILE` th percentile over up to :data:`MEETING_SAMPLE` of them, the clip's
+    own detection noise -- and within the tracker's band ``band_px``. Computed once after the
+    passes (the cells these steps measure carry no clip candidate, so it does not change)."""
     c = result.candidate[result.candidate >= 0]
     if c.size == 0:
-        return np.inf
+        return band_px
     c = c[:: max(1, c.size // MEETING_SAMPLE)]
     direct = cands.direct[c]
     k = np.argmax(cands.mirror_blob[c] >= 0, axis=1)
     mb = cands.mirror_blob[c, k]
     ok = (mb >= 0) & (direct >= 0)
     if not ok.any():
-        return np.inf
-    _, gap = _two_rays(_ray(det.norm[0][direct[ok]]), _ray(_mirror_norm(det, k[ok] + 1, mb[ok])),
-                       normals[k[ok]], ds[k[ok]], focal_px)
-    return float(np.nanpercentile(gap, MEETING_PERCENTILE))
+        return band_px
+    _, gap = _two_rays(det.norm[0][direct[ok]], _mirror_norm(det, k[ok] + 1, mb[ok]), k[ok], normals, ds, focal_px)
+    return min(band_px, float(np.nanpercentile(gap, MEETING_PERCENTILE)))
 
 
 def _blob_tree(det: ClipDetections, view: int, focal_px: float) -> cKDTree:
@@ -202,38 +204,51 @@ def _typical_spacing(det: ClipDetections, view: int, focal_px: float, frames: in
     return float(np.median(d[:, 1]))
 
 
-def _claimed(result: TrackResult, det: ClipDetections, cands, view: int) -> np.ndarray:
-    """Blobs of ``view`` (global indices) that a measured marker holds, as a boolean mask."""
-    taken = np.zeros(len(det.frame[view]), bool)
-    if view == 0:   # assigned_blob counts within each frame
-        f, i = np.nonzero(result.assigned_blob >= 0)
-        b = result.assigned_blob[f, i] + det.start[0][f]
-    else:
-        c = result.candidate[result.candidate >= 0]
-        b = cands.mirror_blob[c, view - 1]
-        b = b[b >= 0]
-    taken[b] = True
+def _measured_blobs(result: TrackResult, det: ClipDetections, cands) -> np.ndarray:
+    """Each measured cell's blob per view ``(F, N, K + 1)``, global indices (-1: none): the direct
+    blob from ``assigned_blob`` (which counts within each frame), the mirror blobs from the clip
+    candidate the cell took."""
+    F, N = result.assigned_blob.shape
+    blobs = np.full((F, N, cands.mirror_blob.shape[1] + 1), -1)
+    f, i = np.nonzero(result.assigned_blob >= 0)
+    blobs[f, i, 0] = result.assigned_blob[f, i] + det.start[0][f]
+    c = result.candidate[f, i]
+    blobs[f[c >= 0], i[c >= 0], 1:] = cands.mirror_blob[c[c >= 0]]
+    return blobs
+
+
+def _claimed(det: ClipDetections, blobs) -> list:
+    """Per view, the blobs (global indices) a measured marker holds, as boolean masks, from
+    :func:`_measured_blobs`."""
+    taken = []
+    for v in range(blobs.shape[2]):
+        mask = np.zeros(len(det.frame[v]), bool)
+        b = blobs[..., v]
+        mask[b[b >= 0]] = True
+        taken.append(mask)
     return taken
 
 
 def _tree_points(xy, frame, colour, focal_px: float) -> np.ndarray:
     """Pixel-scaled image points with the frame and colour class as far-apart extra
-    coordinates: one KD-tree then serves every frame and class."""
+    coordinates: one KD-tree then serves every frame and class. (The idea of
+    ``late._frame_spaced``, with a fixed spacing: the trees here are cached and queried by many
+    point sets, so the spacing cannot depend on the points of one query.)"""
     return np.column_stack([np.asarray(xy, float) * focal_px, np.asarray(frame, float) * COLOUR_SPACING_MM,
                             np.asarray(colour, float) * COLOUR_SPACING_MM])
 
 
 def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                            conjecture, expected_sd, settings: TrackSettings) -> dict:
+                            conjecture, expected_sd, settings: TrackSettings, limit: float) -> dict:
     """Measure the gap cells of ``result`` from unclaimed blobs (module text).
     ``conjecture (F, N, 3)``: every gap cell's conjectured camera-frame point, withheld or not
-    (NaN elsewhere); ``expected_sd (F, N)``: its expected 3D error (mm). From ``settings``: the
-    epipolar band ``band_px`` (the rays of a two-view cell meet closer than this) and
+    (NaN elsewhere); ``expected_sd (F, N)``: its expected 3D error (mm); ``limit``: how closely
+    the rays of a two-view cell must meet (:func:`meeting_limit`). From ``settings``:
     ``min_measured_frames`` (markers measured in fewer than :data:`SETTLED_FACTOR` times as many
     frames are left alone). Updates ``points``,
     ``head_frame``, ``conjectured``, ``camera_mask`` and ``assigned_blob`` in place; returns the
     cells measured per frame, ``{"two_views": (F,), "one_view": (F,)}``."""
-    band_px, min_frames = settings.band_px, SETTLED_FACTOR * settings.min_measured_frames
+    min_frames = SETTLED_FACTOR * settings.min_measured_frames
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
@@ -241,9 +256,10 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
     # a marker measured in few frames may be a chain of chance pairings, its conjecture built on them
     settled = measured.sum(axis=0) >= min_frames
     f_c, i_c = np.nonzero(~measured & settled[None] & np.all(np.isfinite(conjecture), axis=2)
-                          & np.isfinite(expected_sd))
+                          & np.isfinite(expected_sd) & (K > 0))
     F = measured.shape[0]
     counts = {"two_views": np.zeros(F, int), "one_view": np.zeros(F, int)}
+    claimed = _claimed(det, _measured_blobs(result, det, cands))
     if f_c.size == 0:
         result.stats["measured_in_one_view"] = counts["one_view"]
         result.stats["measured_in_two_views_after_gap_fill"] = counts["two_views"]
@@ -278,7 +294,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
         own = (f_r[seen][j_other[:, 0]] == f_c) & (i_r[seen][j_other[:, 0]] == i_c)
         nearest_other = np.where(own, d_other[:, 1], d_other[:, 0])
         gate = np.minimum(gate, SPACING_SHARE * nearest_other)
-        free = ~_claimed(result, det, cands, v)
+        free = ~claimed[v]
         if not free.any():
             continue
         idx = np.flatnonzero(free)
@@ -306,25 +322,20 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
         clash[np.flatnonzero(taken)] = n[inverse] > 1
         blob[clash, v] = -1
 
-    rays = np.full((f_c.size, K + 1, 3), np.nan)   # each view's camera ray (a mirror's: to the virtual point)
-    for v in range(K + 1):
-        has = blob[:, v] >= 0
-        rays[has, v] = _ray(det.norm[v][blob[has, v]])
     direct = blob[:, 0] >= 0
-    mirror = np.argmax(blob[:, 1:] >= 0, axis=1) + 1 if K else np.zeros(f_c.size, int)
-    has_mirror = (blob[:, 1:] >= 0).any(axis=1) if K else np.zeros(f_c.size, bool)
+    mirror = np.argmax(blob[:, 1:] >= 0, axis=1) + 1
+    has_mirror = (blob[:, 1:] >= 0).any(axis=1)
     new = np.full((f_c.size, 3), np.nan)
     mask = np.zeros(f_c.size, int)
     two_view = np.zeros(f_c.size, bool)
     # two views: the direct ray and the mirror's, the point nearest both (least squares on the depths)
     two = direct & has_mirror
     if two.any():
-        k = mirror[two] - 1
-        pt, gap_px = _two_rays(rays[two, 0], rays[two][np.arange(two.sum()), mirror[two]], normals[k], ds[k],
-                               focal_px)
+        rows = np.flatnonzero(two)
+        pt, gap_px = _two_rays(det.norm[0][blob[rows, 0]], _mirror_norm(det, mirror[rows], blob[rows, mirror[rows]]),
+                               mirror[rows] - 1, normals, ds, focal_px)
         # the two rays must meet as closely as the take's own measured pairs do (a merged or partly
         # hidden blob still falls in the epipolar band, off the dot's centre) ...
-        limit = min(band_px, _meeting_limit(result, det, cands, normals, ds, focal_px))
         # ... at a point within the conjecture's expected error
         near = (gap_px <= limit) & (np.linalg.norm(pt - p_conj[two], axis=1) <= TWO_VIEW_SIGMAS * sd[two] + 0.5)
         # both views found a blob and they do not meet: one of them is not this marker's dot
@@ -343,7 +354,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
         rows = np.flatnonzero(one & (view == v))
         if rows.size == 0:
             continue
-        r = rays[rows, v]
+        r = _ray(det.norm[v][blob[rows, v]])       # the view's camera ray (a mirror's: to the virtual point)
         if v == 0:
             new[rows] = _on_ray(p_conj[rows], r)
         else:   # in the mirror's virtual space, then reflected back (eq. 3.12)
@@ -367,7 +378,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
 
 
 def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                 settings: TrackSettings, per_frame, only=None, tried=None) -> list:
+                 settings: TrackSettings, limit: float, per_frame, tried=None) -> list:
     """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
     ends. From the last frame a marker was measured in (and backwards from the next), its direct
     blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
@@ -377,7 +388,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     * an unclaimed blob of its colour lies within :data:`LINK_PX` of the predicted image, and
       within :data:`SPACING_SHARE` of the view's typical dot spacing, the next blob at least
       :data:`LINK_RATIO` times further;
-    * the two rays meet as the take's own pairs do (:func:`_meeting_limit`), within the tracker's
+    * the two rays meet within ``limit`` (:func:`meeting_limit`), within the tracker's
       gate (``gate_mm``) of the marker's last point;
     * no other 3D candidate of the direct blob (another mirror image in its epipolar band) lies
       about as near the predicted point (:func:`_alone_on_its_ray`);
@@ -392,31 +403,24 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     A chain whose next dot is another label's measurement there -- a label never measured in
     the same frame as this one, its point within the gate of this one's prediction -- has found the
     same dot under a second label (a split): it votes ``(this, other)``. Updates ``result`` in
-    place, adds the cells measured to ``per_frame``; returns the votes. ``only``: the markers to
-    follow (default: every settled one); ``tried``: a set of the chain starts tried before (frame,
-    marker, direction), skipped and added to."""
+    place, adds the cells measured to ``per_frame``; returns the votes. ``tried``: a set of the
+    chain starts tried before (frame, marker, direction), skipped and added to."""
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
     F, N = result.assigned_blob.shape
     measured = result.assigned_blob >= 0
     settled = measured.sum(axis=0) >= SETTLED_FACTOR * settings.min_measured_frames
-    if only is not None:
-        settled &= np.isin(np.arange(N), only)
     votes = []
     if K == 0 or not settled.any():
         return votes
-    limit = min(settings.band_px, _meeting_limit(result, det, cands, normals, ds, focal_px))
     trees = [_blob_tree(det, v, focal_px) for v in range(K + 1)]
     # the search radius in each view: at most SPACING_SHARE of the dots' typical spacing there
     radius = np.array([min(LINK_PX, SPACING_SHARE * _typical_spacing(det, v, focal_px)) for v in range(K + 1)])
-    claimed = [_claimed(result, det, cands, v) for v in range(K + 1)]
-    blobs = np.full((F, N, K + 1), -1)                 # each measured cell's global blob per view
-    f, i = np.nonzero(measured)
-    blobs[f, i, 0] = result.assigned_blob[f, i] + det.start[0][f]
-    c = result.candidate[f, i]
-    blobs[f[c >= 0], i[c >= 0], 1:] = cands.mirror_blob[c[c >= 0]]
+    blobs = _measured_blobs(result, det, cands)
+    claimed = _claimed(det, blobs)
     owner = np.full(len(det.frame[0]), -1)             # the label measured from each direct blob
+    f, i = np.nonzero(measured)
     owner[blobs[f, i, 0]] = i
     m32 = measured.astype(np.float32)
     together = (m32.T @ m32) > 0.5                     # labels measured in one frame (BLAS: float)
@@ -488,17 +492,16 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
             point = np.full((frame.size, 3), np.nan)
             if rows.size:
                 m = mirror[rows]
-                mirror_ray = _ray(_mirror_norm(det, m, new_blob[rows, m]))
-                pt, gap_px = _two_rays(_ray(det.norm[0][new_blob[rows, 0]]), mirror_ray, normals[m - 1], ds[m - 1],
-                                       focal_px)
+                direct_pts, mirror_pts = det.norm[0][new_blob[rows, 0]], _mirror_norm(det, m, new_blob[rows, m])
+                pt, gap_px = _two_rays(direct_pts, mirror_pts, m - 1, normals, ds, focal_px)
                 # within the tracker's gate of where the marker's 3D velocity puts it
                 predicted = last_point[rows] + vel3[rows] * (1 + coast[rows, None])
                 meets = (gap_px <= limit) & (np.linalg.norm(pt - predicted, axis=1) <= settings.gate_mm * (1 + coast[rows]))
                 meets &= _alone_on_its_ray(cands, new_blob[rows, 0], pt, predicted)
                 # as surprising along each view's ray as across it (the mirror's ray in real space, eq. 3.9)
-                n_m = normals[m - 1]
+                n_m, mirror_ray = normals[m - 1], _ray(mirror_pts)
                 mirror_ray = mirror_ray - 2.0 * np.sum(mirror_ray * n_m, axis=1, keepdims=True) * n_m
-                for ray in (_ray(det.norm[0][new_blob[rows, 0]]), mirror_ray):
+                for ray in (_ray(direct_pts), mirror_ray):
                     meets &= _surprise_matches(pt - predicted, ray)
                 point[rows[meets]] = pt[meets]
                 ok[rows[~meets]] = False
@@ -536,19 +539,19 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
 
 
 def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                             settings: TrackSettings) -> TrackResult:
+                             settings: TrackSettings, limit: float) -> TrackResult:
     """Each marker's dots followed into its gaps (:func:`_follow_once`), in :data:`FOLLOW_ROUNDS`
     rounds (a second starts again where a chain stopped -- two chains that reached one blob, a
     chain that coasted out -- and follows the merged markers' new gaps); after each, labels found
     to be one dot (a chain that reaches the other's measurement, the two never measured in the
     same frame) are merged, the earlier-seen label keeping the other's measurements
-    (:func:`.late.merge_labels`). Returns the result (a new one when labels merged);
+    (:func:`.late.merge_labels`). ``limit``: :func:`meeting_limit`. Returns the result (a new one when labels merged);
     ``stats["followed_through_gaps"]`` counts the cells measured per frame."""
     per_frame = np.zeros(result.assigned_blob.shape[0], int)
     result.stats["followed_through_gaps"] = per_frame
     tried = set()
     for _ in range(FOLLOW_ROUNDS):
-        votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, per_frame, tried=tried)
+        votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, limit, per_frame, tried=tried)
         measured = result.assigned_blob >= 0
         first = np.argmax(measured, axis=0)
         pairs = []

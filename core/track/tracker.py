@@ -43,7 +43,7 @@ from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
 from .late import add_late_markers, merge_split_labels
-from .singleview import follow_dots_through_gaps, measure_in_single_views
+from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
 from .motion import (
     RELATION_CORRELATION,
     ConstantVelocityKalman,
@@ -263,10 +263,11 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = merge_split_labels(result, s)
     lap("final_pass")
     if s.single_views:
-        result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s)
+        limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
+        result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit)
     conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
-        measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s)
+        measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s, limit)
     lap("gap_fill")
     result.undecided = _still_undecided(undecided, result)
     result.timings = timings
@@ -336,7 +337,8 @@ def _fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_n
        after its last measurement at the end of the take, was 5.9 mm off at 23 frames, where
        other neighbours' relations said 0.5 mm).
 
-    Updates ``points``, ``head_frame`` and ``conjectured`` in place."""
+    Updates ``points``, ``head_frame``, ``conjectured`` in place; returns every gap cell's conjecture, withheld or
+    not (F, N, 3; NaN elsewhere), and its expected error (F, N)."""
     measured = result.assigned_blob >= 0
     F = measured.shape[0]
     motion = result.head_frame - result.neutral[None]  # (F, N, 3), NaN where not reported
