@@ -107,7 +107,7 @@ def detect(args) -> int:
     camera = Camera.load(args.camera) if args.camera else None
     if args.threshold < 0 or args.threshold >= 255:
         raise MirrorCapError("--threshold must be in 0..254")
-    if args.min_area < 1 or args.marker_diameter < 0:
+    if args.min_area < 1 or (args.marker_diameter is not None and args.marker_diameter < 0):
         raise MirrorCapError("--min-area must be at least 1 and --marker-diameter non-negative")
     settings = ExtractionSettings(light=light, threshold=args.threshold, min_area=args.min_area,
                                   marker_diameter_px=args.marker_diameter)

@@ -20,7 +20,9 @@ What it makes, in ``sample_scenes/rig_clip/``:
                     panel, the light path clear of the head).
 - ``scan.ply``      a scan-like mesh of the subject's neutral face: the front of the head only,
                     subdivided, with 0.15 mm of noise, in its own scanner frame (mm).
-- ``rig.json``      the view rectangles (split at the mirror panels' inner edges).
+- ``rig.json``      the view rectangles: two vertical lines, each where the fewest dots of the
+                    clip land in the wrong view (not the mirror panels' edges: the cheeks pass
+                    in front of mirrors turned towards the face).
 - ``scan_landmarks.json``  the scan's landmarks ``{name: [x, y, z]}``, as a user would click them.
 
 The subject is the generic head with a smooth change of proportions (wider, a longer nose, a
@@ -37,7 +39,7 @@ mirrors' normals at +-L degrees from the optical axis, so the mirror planes sit 
 degrees to it), ``--distance MM`` (camera to the head's origin), ``--head-deg RX RY RZ`` (largest
 pitch, yaw and roll of the head motion), ``--tempo T`` (expressions T times as fast and as
 frequent), ``--seed``. ``--truth-only`` recomputes an existing clip's truth.npz (same options)
-without rendering, to add what a newer version records.
+and its rig.json's views without rendering, to add what a newer version records.
 """
 
 from __future__ import annotations
@@ -73,6 +75,7 @@ MIRROR_RADIUS_MM = 120.0          # mirrors tangent to a sphere around the face 
 MIRROR_CENTRE_XY = (0.0, 20.0)    # the sphere's centre; its depth is the head's distance - 90 mm
 MARKER_LIFT_MM = 0.5              # how far a dot's centre sits above the skin
 VISIBLE_DEG = 73.0                # a marker is "seen" by a view within this angle of its skin normal
+IMAGED_DEG = 87.0                 # ...and leaves a blob in the image within this one (where the views split)
 
 
 # sRGB skin tones for normal-light clips (``--skin``), and the four matte paints of the dots there
@@ -132,13 +135,43 @@ def rendered_triangles(head: HeadModel) -> np.ndarray:
     return T[np.all(head.skin_mask(("teeth_upper", "teeth_lower"))[T], axis=1)]
 
 
-def view_rectangles(spec: ClipSpec, camera: Camera) -> dict:
-    """RIG.json's views: the image split where the mirror panels' inner edges are imaged."""
-    panels = mirror_panels(spec)
-    b0 = float(np.floor(camera.project(panels[0][[1, 2]])[:, 0].max()))
-    b1 = float(np.ceil(camera.project(panels[1][[1, 2]])[:, 0].min()))
-    w, h = spec.image_size
+def view_rectangles(camera: Camera, planes, points, seen) -> dict:
+    """RIG.json's views: two vertical lines through the image, each where the fewest dots land on
+    the wrong side over the whole clip -- the direct view's dots ``points`` ``(F, M, 3)`` seen
+    directly and each mirror's images of the dots it shows (``seen`` ``(F, 3, M)``, before any
+    rectangle test). Within the best stretch the line runs through its middle.
+
+    The mirror panels' imaged inner edges are not the split: with the mirrors turned towards the
+    face (45 deg) the cheeks pass in front of the panels, and a line at the panels' edges gave the
+    mirror views ~30 % direct-view dots. ``seen`` counts every dot that leaves a blob (up to
+    ``IMAGED_DEG`` from its view), since a grazing dot put in the wrong view misleads the tracker as
+    much as any other. Where the views overlap (no line clears every dot), the few dots on the
+    wrong side count as not seen in truth.npz's ``visible`` (the rectangles decide)."""
+    w, h = camera.image_size
+    direct_x = camera.project(points[seen[:, 0]])[:, 0]
+    bounds = []
+    for k, (n, d) in enumerate(planes):
+        mirror_x = camera.project(reflect_points(points[seen[:, 1 + k]], n, d))[:, 0]
+        bounds.append(_best_split(mirror_x, direct_x) if k == 0 else w - _best_split(w - mirror_x, w - direct_x))
+    b0, b1 = (float(np.round(b, 1)) for b in bounds)
     return {"mirror0": [0, 0, b0, h], "direct": [b0, 0, b1, h], "mirror1": [b1, 0, w, h]}
+
+
+def _best_split(left_x, right_x) -> float:
+    """The x that puts the fewest of ``left_x`` at or right of it and of ``right_x`` left of it
+    (the middle of the widest such stretch between consecutive values)."""
+    x = np.r_[left_x, right_x]
+    side = np.r_[np.ones(len(left_x)), np.zeros(len(right_x))]
+    order = np.argsort(x, kind="stable")
+    x, side = x[order], side[order]
+    # a split just after sorted position i: left_x beyond it + right_x before it
+    wrong = (side.sum() - np.cumsum(side)) + np.cumsum(1 - side)
+    gap = np.diff(x)
+    wrong, gap = wrong[:-1], gap
+    best = wrong.min()
+    cand = np.flatnonzero(wrong == best)
+    i = cand[np.argmax(gap[cand])]
+    return 0.5 * (x[i] + x[i + 1])
 
 
 def mirror_panels(spec: ClipSpec) -> list:
@@ -161,13 +194,13 @@ def mirror_panels(spec: ClipSpec) -> list:
     return panels
 
 
-def marker_visibility(camera: Camera, planes, panels, layout: ViewLayout, skin_vertices, skin_triangles, centres,
+def marker_visibility(camera: Camera, planes, panels, skin_vertices, skin_triangles, centres,
                       normals, max_deg: float = VISIBLE_DEG) -> np.ndarray:
     """``(3, M)`` bool for one frame: marker seen in the direct view, mirror 0, mirror 1.
 
     A marker is seen in a view when its skin faces that view's (real or mirrored) camera within
-    ``max_deg`` (:func:`synthetic.simulate.visibility`), its image falls in the view's rectangle
-    (RIG.json's ``layout``), in a mirror the reflection point lies on the panel (``panels``, from
+    ``max_deg`` (:func:`synthetic.simulate.visibility`), in a mirror the reflection point lies on the
+    panel (``panels``, from
     :func:`mirror_panels`), and the light path to the camera misses the head (Blender's BVH ray
     cast: the marker to the mirror and the mirror to the camera). Camera frame, mm."""
     from mathutils import Vector
@@ -183,21 +216,27 @@ def marker_visibility(camera: Camera, planes, panels, layout: ViewLayout, skin_v
         return bvh.ray_cast(Vector(a + v / dist * 0.05), Vector(v / dist), dist - 0.1)[0] is None
 
     origin = np.zeros(3)
-    px = camera.project(P)
-    out[0] &= layout.assign(px[:, 0], px[:, 1]) == 0
     out[0] = [c and clear(p, origin) for c, p in zip(out[0], P)]
     for k, ((n, d), panel) in enumerate(zip(planes, panels)):
         n = np.asarray(n)
-        px = camera.project(reflect_points(P, n, d))
         to_eye = reflect_points(origin, n, d) - P         # towards the mirrored camera centre
         s = (d - P @ n) / (to_eye @ n)                    # where the path meets the mirror
         hit = P + s[:, None] * to_eye
         u, w = panel[1] - panel[0], panel[3] - panel[0]
         a, b = (hit - panel[0]) @ u / (u @ u), (hit - panel[0]) @ w / (w @ w)
-        out[1 + k] &= ((s > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
-                       & (layout.assign(px[:, 0], px[:, 1]) == 1 + k))
+        out[1 + k] &= (s > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
         out[1 + k] = [c and clear(p, h) and clear(h, origin) for c, p, h in zip(out[1 + k], P, hit)]
     return out
+
+
+def inside_views(camera: Camera, planes, points, layout: ViewLayout) -> np.ndarray:
+    """``(F, 3, M)``: each dot's direct image and mirror images inside their own view's rectangle."""
+    images = [points, *(reflect_points(points, n, d) for n, d in planes)]
+    out = []
+    for v, X in enumerate(images):
+        px = camera.project(X.reshape(-1, 3)).reshape(*X.shape[:2], 2)
+        out.append(layout.assign(px[..., 0], px[..., 1]) == v)
+    return np.stack(out, axis=1)
 
 
 def make_scan(head: HeadModel, subject: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -439,7 +478,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-scan", action="store_true", help="write no scan.ply / scan_landmarks.json")
     ap.add_argument("--truth-only", action="store_true",
                     help="render nothing: recompute the truth of an existing clip made with the same options "
-                         "(checked against its truth.npz) and add what this version records (visibility)")
+                         "(checked against its truth.npz) and add what this version records (visibility, rig.json's views)")
     ap.add_argument("--scan-landmarks-only", action="store_true",
                     help="render nothing: rewrite an existing clip's scan_landmarks.json at the generic head's "
                          "current landmark vertices (from the clip's truth.npz)")
@@ -471,8 +510,6 @@ def main(argv=None) -> int:
 
     camera = Camera.ideal(spec.focal_px, spec.image_size)
     planes, panels = rig_planes(spec), mirror_panels(spec)
-    views = view_rectangles(spec, camera)
-    layout = ViewLayout(regions=views)
     skin_T = rendered_triangles(head)
     if not args.truth_only:
         scene, skin, markers, unit = build_scene(bpy, head, subject, marker_colors, spec)
@@ -481,6 +518,7 @@ def main(argv=None) -> int:
     frames = [args.preview] if args.preview is not None else [] if args.truth_only else range(args.frames)
     points = np.empty((args.frames, len(verts), 3))
     visible = np.zeros((args.frames, 3, len(verts)), bool)
+    imaged = np.zeros_like(visible)                     # any dot not edge-on or hidden: the detector finds it
     t0 = time.perf_counter()
     for f in range(args.frames):
         q = subject + disp[f]
@@ -489,8 +527,10 @@ def main(argv=None) -> int:
         cam_v = q @ R[f].T + t[f]
         points[f] = centre_q @ R[f].T + t[f]
         if args.preview is None:
-            visible[f] = marker_visibility(camera, planes, panels, layout, cam_v, skin_T, points[f],
+            visible[f] = marker_visibility(camera, planes, panels, cam_v, skin_T, points[f],
                                            normals[verts] @ R[f].T)
+            imaged[f] = marker_visibility(camera, planes, panels, cam_v, skin_T, points[f],
+                                          normals[verts] @ R[f].T, max_deg=IMAGED_DEG)
         if f not in frames:
             continue
         png = cache / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"
@@ -508,8 +548,10 @@ def main(argv=None) -> int:
         print(f"frame {done}/{args.frames}  {time.perf_counter() - t0:.0f} s", flush=True)
     if args.preview is not None:
         return 0
+    views = view_rectangles(camera, planes, points, imaged)
+    visible &= inside_views(camera, planes, points, ViewLayout(regions=views))
     if args.truth_only:
-        return rewrite_truth(out, points, visible)
+        return rewrite_truth(out, points, visible, views)
 
     # encode the PNGs to H.264 with Blender's FFmpeg through the sequencer
     tmp_dir = out.with_name(out.name + ".tmp")
@@ -579,9 +621,10 @@ def npz_bytes(**arrays) -> bytes:
     return buf.getvalue()
 
 
-def rewrite_truth(out: Path, points, visible) -> int:
-    """``--truth-only``: the existing clip's truth.npz with this version's ``visible`` added,
-    after checking that the same options give the same marker positions."""
+def rewrite_truth(out: Path, points, visible, views) -> int:
+    """``--truth-only``: the existing clip's truth.npz with this version's ``visible`` added and
+    its rig.json with this version's views, after checking that the same options give the same
+    marker positions."""
     path = out / "truth.npz"
     if not path.is_file():
         raise SystemExit(f"{path}: no such file (render the clip first)")
@@ -591,7 +634,12 @@ def rewrite_truth(out: Path, points, visible) -> int:
         raise SystemExit(f"{path}: these options do not reproduce the clip's markers "
                          f"(shape {old['points'].shape} vs {points.shape}, max difference {err:.4g} mm)")
     old["visible"] = visible
-    write_files_atomically({path: npz_bytes(**old)})
+    rig_path = out / "rig.json"
+    rig = json.loads(rig_path.read_text()) if rig_path.is_file() else {}
+    if rig.get("views") != views:
+        print(f"{rig_path}: views {rig.get('views')} -> {views}")
+    rig["views"] = views
+    write_files_atomically({path: npz_bytes(**old), rig_path: json.dumps(rig, indent=2) + "\n"})
     seen = visible[:, 0] & (visible[:, 1] | visible[:, 2])
     print(f"{path}: visibility added; {seen.mean():.1%} of marker-frames seen in the direct view and a mirror")
     return 0

@@ -176,6 +176,26 @@ def test_view_split_by_gaps_and_rig_file(rig, tmp_path):
             rigfile.load_rig_views(rig_file)
 
 
+def test_view_boundaries_through_dots_are_found():
+    """A boundary in the empty stretch between two views is clear; one a third of the way into a view
+    is crowded, and the emptiest line nearby is the gap (core.capture.rig.check_view_boundaries)."""
+    rng = np.random.default_rng(3)
+    frames = 50
+    x = np.concatenate([rng.uniform(100, 300, 60 * frames), rng.uniform(340, 700, 120 * frames),
+                        rng.uniform(740, 940, 60 * frames)])
+    clear = rigfile.check_view_boundaries(x, rigfile.ViewLayout(boundaries=(320.0, 720.0)), frames, 6.0)
+    assert not clear["crowded"] and all(b["crowding"] == 0 for b in clear["boundaries"])
+    cut = rigfile.check_view_boundaries(x, rigfile.ViewLayout(boundaries=(400.0, 720.0)), frames, 6.0)
+    first, second = cut["boundaries"]
+    assert cut["crowded"] and first["crowded"] and not second["crowded"]
+    assert first["between"] == ["mirror0", "direct"] and first["crowding"] > 0.8
+    assert first["dots_per_frame"] == pytest.approx(120 / 360 * 12, rel=0.2)  # 12 px of a view of 120 dots
+    assert 300 <= first["emptiest_x"] <= 340 and first["emptiest_crowding"] == 0
+    regions = rigfile.ViewLayout(regions={"mirror0": (0, 0, 400, 720), "direct": (400, 0, 720, 720),
+                                          "mirror1": (720, 0, 1280, 720)})
+    assert rigfile.check_view_boundaries(x, regions, frames, 6.0) == cut
+
+
 def test_clip_frames_move_and_keep_truth(rig):
     frames = list(rig_clip_frames(rig, 3, RenderSettings(), seed=0))
     assert len(frames) == 3
@@ -226,3 +246,22 @@ def test_blob_test_drops_teeth_keeps_foreshortened_markers_and_splits_touching_o
         assert np.linalg.norm(xy[i] - centre) < 0.6
     assert not np.any(np.linalg.norm(xy[:, None] - np.array([c for c, _, _ in teeth])[None], axis=2) < 10)
     assert found.elongation[np.argmin(np.linalg.norm(xy - (100.3, 40.6), axis=1))] > 2.5  # foreshortened, kept
+
+
+def test_fragments_merge_within_the_frames_typical_dot():
+    """Without --marker-diameter, fragments merge within the frame's typical dot, at most 6 px: the
+    interlaced grid (fields 6 px apart) keeps 6 px; pairs of ~3 px dots of one colour 5 px apart (as
+    on the dense 720x480 rig's mirror images) stay two dots, where a fixed 6 px merges each pair."""
+    img, truth = _grid_frame(comb_px=6)
+    det = mk.extract_markers(img, mk.ColorClasses.default())
+    assert len(det) == truth.visible.sum()
+    img = np.zeros((240, 240, 3), np.uint8)
+    yy, xx = np.mgrid[0:240, 0:240]
+    centres = [(20 + 20 * i + 5 * k, 20 + 20 * j) for i in range(10) for j in range(10) for k in range(2)]
+    for cx, cy in centres:
+        img[(xx - cx) ** 2 + (yy - cy) ** 2 <= 1.2 ** 2] = CLASS_RGB[0][::-1]
+    auto = mk.extract_markers(img, mk.ColorClasses.default())
+    fixed = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(marker_diameter_px=6.0))
+    assert len(auto) == len(centres) == 200
+    assert len(fixed) == 100
+    assert np.allclose(np.sort(auto.x), np.sort([c[0] for c in centres]), atol=1e-6)

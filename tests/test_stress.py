@@ -59,7 +59,10 @@ def test_dense_rig_at_the_papers_resolution_self_calibrated(tmp_path, capsys):
     """The dense stress clip (`make stress-clips`: 720x480, 290 markers of 2.2 mm, mirror planes
     at 40 deg to the axis), its first 60 frames, mirrors self-calibrated: the two mirrors' scales
     linked through markers tracked in both within 0.5 % (the issue's rig was 2 % off), the take
-    within the issue's 0.5 mm RMS after one similarity, no identity switch."""
+    within the issue's 0.5 mm RMS after one similarity, no identity switch, no point over 2 mm.
+    The dots are ~4 px across here: fragments merge within the frame's typical dot (4.1 px), not a
+    fixed 6 px, which merged neighbouring dots of one colour (measured with 6 px: 90.4 % of the seen
+    marker-frames reported, 0.26 mm RMS, 14 points over 2 mm; now 92.2 %, 0.22 mm, none)."""
     from mirrorcap.core.geometry.camera import Camera
     from mirrorcap.core.take.c3d import read_c3d
     from mirrorcap.synthetic.evaluate import score_take
@@ -75,12 +78,16 @@ def test_dense_rig_at_the_papers_resolution_self_calibrated(tmp_path, capsys):
     assert ds[1] / ds[0] == pytest.approx(truth["mirror_d"][1] / truth["mirror_d"][0], rel=0.005)
     assert report["mirror_scale_link"]["markers"] >= 10 and report["mirror_agreement"]["consistent"] is True
     take = read_c3d(tmp_path / "take.c3d")
+    vis = truth["visible"][:60]
     s = score_take(take["points"], truth["points"][:60], Camera.from_dict(json.loads((clip / "camera.json")
                                                                                       .read_text())),
-                   conjectured=take["conjectured"])
-    assert s["markers_tracked"] >= 150 and s["markers_matched"] == s["markers_tracked"]
+                   conjectured=take["conjectured"], seen=vis[:, 0] & (vis[:, 1] | vis[:, 2]))
+    assert s["markers_tracked"] >= 200 and s["markers_matched"] == s["markers_tracked"]
     assert s["identity_switches"] == 0
-    assert s["rms_mm"] < 0.5
+    assert s["rms_mm"] < 0.25
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert np.nanmax(err_mm) < 2.0
+    assert s["seen_reported_fraction"] > 0.915
 
 
 def test_later_chains_of_a_marker_merge_back_into_it(tmp_path, capsys):
@@ -152,8 +159,12 @@ def test_the_sample_clip_reports_its_seen_markers(tmp_path, capsys):
     from mirrorcap.synthetic.evaluate import score_take
 
     code, out, err = _run(["track", SAMPLE / "clip.mp4", "--camera", SAMPLE / "camera.json", "--rig",
-                           SAMPLE / "rig.json", "-o", tmp_path / "take.c3d"], capsys)
+                           SAMPLE / "rig.json", "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"],
+                          capsys)
     assert code == 0, err
+    report = json.loads((tmp_path / "take.json").read_text())
+    assert not report["view_layout"]["crowded"] and "runs through dots" not in out + err  # the views' gaps are clear
+    assert report["mirror_agreement"]["consistent"] is True
     truth = np.load(SAMPLE / "truth.npz")
     take = read_c3d(tmp_path / "take.c3d")
     seen = truth["visible"][:, 0] & (truth["visible"][:, 1] | truth["visible"][:, 2])
@@ -164,3 +175,43 @@ def test_the_sample_clip_reports_its_seen_markers(tmp_path, capsys):
           f"{s['identity_switches']} switches, max {np.nanmax(err_mm):.2f} mm")
     assert s["seen_reported_fraction"] >= 0.99
     assert s["identity_switches"] == 0 and np.nanmax(err_mm) < 2.0
+
+
+def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hold(tmp_path, capsys):
+    """#18, the held-out mirror45 clip (mirrors at 45 deg, 200 markers of 3 mm): the clip maker had
+    split the views at the mirror panels' edges, but the cheeks pass in front of mirrors turned this
+    far, so the line ran through the face (~30 % of the mirror views' blobs were direct-view dots).
+    With those views the take was silently wrong (mirror 1 0.41 deg off, 50 switches); now REPORT.json
+    and the command line say the boundaries run through dots. With the views split where the fewest dots cross
+    (the clip maker's rig.json now), self-calibration holds: 0 switches, 0.22 mm RMS, scales 0.02 % apart."""
+    from mirrorcap.core.geometry.camera import Camera
+    from mirrorcap.core.take.c3d import read_c3d
+    from mirrorcap.synthetic.evaluate import score_take
+
+    clip = ROOT / "sample_scenes" / "stress" / "mirror45"
+    panel_edges = tmp_path / "panel_edges.json"
+    panel_edges.write_text(json.dumps({"views": {"mirror0": [0, 0, 529, 720], "direct": [529, 0, 750, 720],
+                                                 "mirror1": [750, 0, 1280, 720]}}))
+    truth = np.load(clip / "truth.npz")
+    runs = {}
+    for name, rig in (("panel edges", panel_edges), ("clip", clip / "rig.json")):
+        code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", rig,
+                               "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
+        assert code == 0, err
+        report = json.loads((tmp_path / "take.json").read_text())
+        take = read_c3d(tmp_path / "take.c3d")
+        s = score_take(take["points"], truth["points"], Camera.load(clip / "camera.json"),
+                       conjectured=take["conjectured"])
+        ds = [m["d"] for m in report["mirrors"]]
+        runs[name] = (report, out + err, s, ds[1] / ds[0] / (truth["mirror_d"][1] / truth["mirror_d"][0]) - 1)
+    report, text, s, ratio_error = runs["panel edges"]
+    assert all(b["crowded"] and b["crowding"] > 1.0 for b in report["view_layout"]["boundaries"])
+    assert [b["x"] for b in report["view_layout"]["boundaries"]] == [529, 750]
+    assert text.count("runs through dots") == 2
+    assert s["identity_switches"] > 20  # what the user gets from such views: the warnings are earned
+    report, text, s, ratio_error = runs["clip"]
+    assert report["mirror_agreement"]["consistent"] is True
+    assert abs(ratio_error) < 0.001
+    assert s["identity_switches"] == 0 and s["split_markers"] == 0
+    assert s["markers_tracked"] >= 135 and s["markers_matched"] == s["markers_tracked"]
+    assert s["rms_mm"] < 0.3

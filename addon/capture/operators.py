@@ -89,6 +89,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
 
     def run(self, context):
         from ...core.capture.markers import marker_extractor
+        from ...core.capture.detect import dot_diameter_px
         from ...core.capture.rig import split_views_by_gaps
         from ...core.capture.video import open_source
         from ..common.clip import detections_to_clip_tracks, find_clip
@@ -106,7 +107,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
             raise InputError(f"no markers found in frame {n}: " + ("are there coloured dots of the colour classes on "
                              "the face?" if s.light == "normal" else "is the clip dark with bright dots? (coloured dots "
                              "under ordinary light: set Light to Normal)"))
-        layout = rig.views or split_views_by_gaps(det.x, 2.0 * settings.marker_diameter_px)
+        layout = rig.views or split_views_by_gaps(det.x, 2.0 * dot_diameter_px(settings, [det]))
         view = layout.assign(det.x, det.y)
         clip = find_clip(video)
         count = detections_to_clip_tracks(clip, n, det.x, det.y, det.color, view, source.size)

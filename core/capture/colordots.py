@@ -28,7 +28,7 @@ change when a lamp dims or a surface turns away from it -- against the *local* b
    ``max_hue_deg >= 180`` (learning classes, when there are none yet) any blob whose hue is
    :data:`LEARN_FROM_SKIN_DEG` from the skin's counts;
 5. **merge** fragments of one dot (same class, centres closer than half of
-   ``marker_diameter_px``: no interlaced fields break a dot here, and two neighbouring dots of
+   ``marker_diameter_px``, by default ``MAX_DOT_PX``: no interlaced fields break a dot here, and two neighbouring dots of
    one colour at the face's silhouette must stay two) and drop **specks** under ``min_area``
    pixels;
 6. **shape test** -- a blob longer than ``max_streak`` times its width (weighted second
@@ -51,6 +51,7 @@ from .detections import Detections, blob_shape, empty_detections, merge_fragment
 
 BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times smaller
 LEARN_FROM_SKIN_DEG = 15.0  # learning classes: a dot's hue differs from the skin around it by this much
+MAX_DOT_PX = 6.0  # a dot's diameter when ExtractionSettings.marker_diameter_px is not given
 
 
 def hue_saturation(rgb) -> tuple:
@@ -141,7 +142,8 @@ class ColorDotExtractor:
                          *(np.bincount(lab, wgt * bg_chroma[:, c], m) for c in range(3))], axis=1)
         sums = sums[sums[:, 0] > 0]
         cls = self.colors.by_hue(sums[:, 5:8])[0]
-        sums, _ = merge_fragments(sums, cls, 0.5 * s.marker_diameter_px)                 # step 5: fragments
+        diameter = MAX_DOT_PX if s.marker_diameter_px is None else s.marker_diameter_px
+        sums, _ = merge_fragments(sums, cls, 0.5 * diameter)                             # step 5: fragments
         cx, cy, elongation, rgb, saturation = blob_shape(sums)          # columns 0-10 as the UV extractor's
         blob_contrast = np.linalg.norm(rgb - sums[:, 11:14] / sums[:, :1], axis=1)
         cls, hue_diff, _ = self.colors.by_hue(rgb)

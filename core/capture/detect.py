@@ -29,7 +29,8 @@ from ..common.errors import InputError
 from ..common.files import default_file_mode, write_files_atomically
 from ..common.log import FrameProgress
 from ..geometry.camera import Camera
-from .markers import ColorClasses, ExtractionSettings, marker_extractor
+from .detections import typical_dot_diameter_px
+from .markers import MAX_MERGE_PX, ColorClasses, ExtractionSettings, marker_extractor
 from .rig import VIEW_NAMES, ViewLayout, split_views_by_gaps
 from .video import VideoSource
 
@@ -80,7 +81,19 @@ def _layout_from(pending, settings: ExtractionSettings, source: VideoSource) -> 
     if xs.size == 0:
         raise InputError(f"no markers found in the first {len(pending)} frames of {source.path} "
                          f"{_nothing_found_hint(settings)}")
-    return split_views_by_gaps(xs, min_gap_px=2.0 * settings.marker_diameter_px)
+    return split_views_by_gaps(xs, min_gap_px=2.0 * dot_diameter_px(settings, [d for _, d in pending]))
+
+
+def dot_diameter_px(settings: ExtractionSettings, detections) -> float:
+    """A dot's diameter in pixels: ``settings.marker_diameter_px`` when given, else the typical dot
+    (:func:`.detections.typical_dot_diameter_px`) of the blobs of ``detections`` (a list of
+    :class:`.detections.Detections`), at most ``MAX_MERGE_PX`` -- as the extractor merges fragments
+    (:func:`.markers.merge_marker_fragments`)."""
+    if settings.marker_diameter_px is not None:
+        return float(settings.marker_diameter_px)
+    areas = np.concatenate([np.asarray(d.area, float) for d in detections]) if detections else np.zeros(0)
+    dot = typical_dot_diameter_px(areas)
+    return min(dot, MAX_MERGE_PX) if dot > 0 else MAX_MERGE_PX
 
 
 def _nothing_found_hint(settings: ExtractionSettings) -> str:
@@ -96,7 +109,8 @@ class DetectionStream:
     ``(frame_number, Detections, view (n,))``. Until the view layout is known (from a
     rig file, or from the first ``LAYOUT_FRAMES`` frames' gaps) detections are buffered
     -- detections, never images. ``extract_s`` accumulates the extraction time and
-    ``processed`` the frames read; ``layout`` is set once known."""
+    ``processed`` the frames read; ``layout`` is set once known, ``dot_px`` (a dot's diameter,
+    :func:`dot_diameter_px` of the first frames) with it."""
 
     def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
                  layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
@@ -108,10 +122,11 @@ class DetectionStream:
         self.progress = progress
         self.extract_s = 0.0
         self.processed = 0
+        self.dot_px = settings.marker_diameter_px
 
     def __iter__(self):
         extractor = marker_extractor(self.colors, self.settings)
-        pending = []
+        pending, first = [], []
         for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
             t0 = time.perf_counter()
             det = extractor(frame)
@@ -119,6 +134,10 @@ class DetectionStream:
             self.processed += 1
             if self.progress:
                 self.progress(self.processed)
+            if self.dot_px is None:
+                first.append(det)
+                if len(first) >= min(LAYOUT_FRAMES, self.total):
+                    self.dot_px = dot_diameter_px(self.settings, first)
             if self.layout is None:
                 pending.append((n, det))
                 if len(pending) >= min(LAYOUT_FRAMES, self.total):
@@ -128,6 +147,8 @@ class DetectionStream:
                     pending = []
             else:
                 yield n, det, self.layout.assign(det.x, det.y)
+        if self.dot_px is None:
+            self.dot_px = dot_diameter_px(self.settings, first)
         if self.layout is None:
             if self.processed == 0:
                 raise InputError(f"no frame could be read from {self.source.path}")
@@ -208,7 +229,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
 
 def learn_color_classes(source: VideoSource, n_classes: int, *, names=None, start: int = 0, end: int | None = None,
                         step: int = 1, max_frames: int = 50, threshold: float = 60.0,
-                        marker_diameter_px: float = 6.0, samples_per_class: int = 8,
+                        marker_diameter_px: float | None = None, samples_per_class: int = 8,
                         light: str = "uv") -> ColorClasses:
     """Learn ``n_classes`` colour classes from the markers of sample frames: k-means
     (OpenCV, fixed seed) on each marker's mean normalised colour; each class keeps

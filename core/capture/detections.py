@@ -30,6 +30,12 @@ def empty_detections() -> Detections:
                       np.zeros((0, 3)), np.zeros(0))
 
 
+def typical_dot_diameter_px(areas) -> float:
+    """The diameter of a disc of the median blob area (pixels): a frame's typical dot. 0 without blobs."""
+    areas = np.asarray(areas, float)
+    return float(2.0 * np.sqrt(np.median(areas) / np.pi)) if areas.size else 0.0
+
+
 def merge_fragments(sums, cls, radius_px: float):
     """Blobs of one class whose centres lie within ``radius_px`` of each other are fragments of
     one marker (interlaced fields, broken labelling): ``sums (n, k)`` of per-blob sums whose

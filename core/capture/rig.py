@@ -97,6 +97,55 @@ def split_views_by_gaps(x, min_gap_px: float, stray_fraction: float = 0.01, min_
     return ViewLayout(boundaries=tuple(bounds))
 
 
+BOUNDARY_CROWDED = 0.25   # a view boundary is crowded when the dots near it reach this share of a view's density
+
+
+def view_boundaries(layout: ViewLayout) -> list:
+    """``[(x, left view, right view)]``: the vertical lines that separate the views of
+    ``layout`` (its two x boundaries, or the direct rectangle's left and right edges)."""
+    if not layout.regions:
+        b0, b1 = layout.boundaries
+        return [(float(b0), "mirror0", "direct"), (float(b1), "direct", "mirror1")]
+    x0, _, x1, _ = layout.regions["direct"]
+    return [(float(x0), "mirror0", "direct"), (float(x1), "direct", "mirror1")]
+
+
+def check_view_boundaries(x, layout: ViewLayout, frames: int, dot_px: float) -> dict:
+    """Do the view boundaries of ``layout`` run between the views' dots? ``x``: the detections'
+    image x pooled over ``frames`` frames; ``dot_px``: a dot's diameter in pixels.
+
+    Per boundary: ``dots_per_frame`` within ``dot_px`` of it and ``crowding``, the detection
+    density there (a window ``2 dot_px`` wide) over the views' typical density (the median of
+    the windows that hold any detection), and the emptiest line within a tenth of the image's
+    span on either side (``emptiest_x``, ``emptiest_crowding``). A boundary is ``crowded`` above
+    ``BOUNDARY_CROWDED``: either it cuts through a view (a split at the mirrors' edges does, once
+    the mirrors are turned so far towards the face that the cheeks pass in front of them) or the
+    views touch there; either way dots near it are read in the wrong view. Density alone cannot
+    tell the two apart -- a mirror image is densest at its foreshortened edge -- so the report
+    gives the emptiest line nearby for the user to judge."""
+    xs = np.sort(np.asarray(x, dtype=float))
+    half = max(float(dot_px), 2.0)
+    out = {"boundaries": [], "crowded": False}
+    if xs.size < 10 or frames < 1:
+        return out
+    lo, hi = float(xs[0]), float(xs[-1])
+    centres = np.arange(np.floor(lo), np.ceil(hi) + 1.0)
+    counts = np.searchsorted(xs, centres + half) - np.searchsorted(xs, centres - half)
+    typical = float(np.median(counts[counts > 0]))
+    reach = 0.1 * (hi - lo)
+    for b, left, right in view_boundaries(layout):
+        near = int(np.searchsorted(xs, b + half) - np.searchsorted(xs, b - half))
+        window = np.flatnonzero((centres >= b - reach) & (centres <= b + reach))
+        i = window[np.argmin(counts[window])] if window.size else None
+        best_x, best = (float(centres[i]), int(counts[i])) if i is not None else (b, near)
+        entry = {"x": b, "between": [left, right], "dots_per_frame": near / frames, "crowding": near / typical,
+                 "emptiest_x": best_x, "emptiest_crowding": best / typical,
+                 "crowded": bool(near / typical > BOUNDARY_CROWDED)}
+        out["boundaries"].append(entry)
+        out["crowded"] |= entry["crowded"]
+    return out
+
+
 def load_rig_views(path) -> ViewLayout | None:
     """The ``views`` rectangles of a RIG.json (see module docstring); None when the file
     only names the rigid markers (the views are then split automatically)."""

@@ -16,7 +16,11 @@ samples, markers; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrors
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
 the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px,
 relative_difference, ``consistent``: false -- with a warning -- when the median difference
-exceeds twice the expected sd; null when too few markers are seen in both); ``frames`` (first, last, step, count, fps); ``markers`` (count,
+exceeds twice the expected sd; null when too few markers are seen in both); ``view_layout``
+(:func:`..capture.rig.check_view_boundaries`: per boundary between views its ``x``, the views
+``between`` it, ``dots_per_frame`` within a dot of it, ``crowding`` -- the detection density there
+over a view's --, the ``emptiest_x`` line nearby and its ``emptiest_crowding``, and ``crowded``, with a
+warning; null for detections given without a layout); ``frames`` (first, last, step, count, fps); ``markers`` (count,
 labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file",
 "settings" (the add-on's) or "automatic"; ``undecided``: direct-view markers of the first frames that could not be
 paired with a mirror image and were not found later, each with the frame and pixel position
@@ -36,7 +40,7 @@ import time
 import numpy as np
 
 from ..capture.markers import ColorClasses, ExtractionSettings
-from ..capture.rig import ViewLayout
+from ..capture.rig import ViewLayout, check_view_boundaries
 from ..capture.views import ClipDetections, FrameDets
 from ..capture.video import VideoSource
 from ..common.log import MessageLog
@@ -83,10 +87,14 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                              start, end, step, progress)
     numbers, frames = collect_detections(stream)
     t_detect = time.perf_counter() - t0
+    xs = np.concatenate([np.r_[f.direct[:, 0], f.mirror[0][:, 0], f.mirror[1][:, 0]] for f in frames]) if frames \
+        else np.zeros(0)
+    views = check_view_boundaries(xs, stream.layout, len(frames), stream.dot_px or 0.0) \
+        if stream.layout is not None else None
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
-                            rigid_source=rigid_source, log=log, seeds=seeds)
+                            rigid_source=rigid_source, log=log, seeds=seeds, view_check=views)
 
 
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
@@ -104,12 +112,15 @@ def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
 def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
                      timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
-                     rigid_source: str = "rig file", log: MessageLog | None = None, seeds=None) -> dict:
+                     rigid_source: str = "rig file", log: MessageLog | None = None, seeds=None,
+                     view_check: dict | None = None) -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
     ``rigid``: the markers that carry the head pose, as :func:`core.track.tracker.track` takes them.
     Without MIRRORS.json the scale is set by putting the face ``face_distance_mm`` away.
-    Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``."""
+    Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``.
+    ``view_check``: :func:`..capture.rig.check_view_boundaries` of the detections' view layout
+    (REPORT.json ``view_layout``; a warning when a boundary runs through dots)."""
     from .mirrorscale import both_mirror_samples, link_mirror_scales, mirror_agreement
     from .selfcal import self_calibrate_mirror
 
@@ -157,6 +168,14 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         units = "mm"
     rate = fps
     log = log if log is not None else MessageLog()
+    for b in (view_check or {}).get("boundaries", []):
+        if b["crowded"]:
+            left, right = b["between"]
+            log.warning(f"the view boundary at x = {b['x']:.0f} ({left} | {right}) runs through dots "
+                        f"({b['dots_per_frame']:.1f} detections per frame within a dot of it): the views touch there, "
+                        f"or the rig file's views are misplaced (the emptiest line nearby is x = {b['emptiest_x']:.0f}); "
+                        "dots on the wrong side are read as the other view's -- check the views, or move the mirrors "
+                        "out or turn them away from the face")
     agreement = mirror_agreement(both, np.stack([p.normal for p in planes]), np.array([p.d for p in planes]),
                                  camera.focal_px)
     if agreement["consistent"] is False:
@@ -181,6 +200,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     for k, p in enumerate(planes)],
         "mirror_scale_link": scale_link,
         "mirror_agreement": agreement,
+        "view_layout": view_check,
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
                     "rigid": [result.labels[i] for i in result.rigid],
