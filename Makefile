@@ -54,7 +54,8 @@ contact-sheet: $(STAMP)
 # The stress clips of issue #18 (Cycles, cached frames): a dense 720x480 rig at the paper's resolution
 # (290 markers of 2.2 mm, mirror planes at 40 deg to the optical axis) and a 1280x720 clip with large head
 # motion (+-15 deg yaw, +-10 deg pitch) and expressions 2.5x as fast; and mirror45, held out (200 markers of 3 mm,
-# mirrors at 45 deg, 90 frames), rendered after the tracker was tuned. About 25 minutes on 2 cores.
+# mirrors at 45 deg, 90 frames), rendered after the tracker was tuned; and mirror35, held out too (960x540, 250
+# markers of 2.5 mm, mirrors at 35 deg: no marker in both mirrors). About 30 minutes on 2 cores.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -62,6 +63,9 @@ stress-clips: $(STAMP)
 		--frames 300 --seed 12 --no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/mirror45 --frames 90 --samples 4 --seed 23 \
 		--markers 200 --marker-mm 3.0 --mirror-deg 45 --head-deg 8 12 3 --tempo 1.5 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/mirror35 --size 960 540 --focal 1000 --markers 250 \
+		--marker-mm 2.5 --mirror-deg 35 --distance 600 --head-deg 6 10 3 --tempo 1.2 --frames 90 --samples 4 --seed 31 \
+		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
 # (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps. About 35 minutes.

@@ -10,7 +10,10 @@ rig; pairs between *2D tracks* (:func:`.pairing.paired_tracks`) are >= 99.5 % pr
 
 :func:`both_mirror_samples` collects such markers from a few windows of frames spread over
 the clip; :func:`link_mirror_scales` takes the ratio as their median (robust to the rare
-wrong pair); :func:`mirror_agreement` tests a take's planes -- self-calibrated or from
+wrong pair). A rig whose mirrors see only the sides of the face has no marker in both mirrors
+(mirrors at 35 deg on a 960x540 clip: none in 90 frames); :func:`link_mirror_scales_by_motion`
+then relates the scales through the head's motion, which moves both halves of the face rigidly
+together. :func:`mirror_agreement` tests a take's planes -- self-calibrated or from
 MIRRORS.json -- on the same markers: through the two mirrors a marker must land at the same
 depth within its expected error (the detection noise, from the pairs' band residuals,
 propagated through eq. 3.10-3.11 for each mirror).
@@ -26,11 +29,17 @@ from ..capture.views import ClipDetections
 from ..common.errors import DegenerateError
 from ..geometry.camera import Camera
 from ..geometry.mirror import depths_from_planes
+from ..geometry.rigid import rigid_fit
 from .pairing import paired_tracks, partner_blobs
 
 WINDOW_FRAMES = 15       # frames per window of 2D tracks (as the tracker's initial pairing)
 WINDOWS = 4              # windows spread over the clip
 AGREEMENT_LIMIT = 2.0    # a take's mirrors disagree when the typical marker is off by more than 2 expected sd
+MIN_BOTH_MIRROR_SIGHTINGS = 10  # fewer sightings of markers in both mirrors: the scales are linked by head motion
+MOTION_FRAMES = 300      # head-motion link: the first frames of the clip it reads
+MOTION_MAX_ERROR = 0.005  # ... refused when its standard error exceeds 0.5 % (too little head motion)
+MOTION_MIN_SHARE = 0.005  # ... or when the head's translation between frames is under 0.5 % of its distance
+                          # (the clips move 2-17 %; a still head moves 0)
 
 
 @dataclass
@@ -94,7 +103,7 @@ def link_mirror_scales(samples: BothMirrorSamples, normals, ds) -> tuple[np.ndar
     ``samples`` of the ratio of a marker's depth through mirror 0 to its depth through
     mirror 1. Returns the new ``ds`` and the figures (ratio, its robust relative spread
     1.4826 MAD, standard error, samples, markers)."""
-    if len(samples.p) < 10:
+    if len(samples.p) < MIN_BOTH_MIRROR_SIGHTINGS:
         raise DegenerateError(f"only {len(samples.p)} sightings of markers in both mirrors: the two mirrors' scales "
                               "cannot be related (give MIRRORS.json from `mirrorcap mirrors`)")
     z0 = _along_ray(samples.p, samples.pm[0], normals[0], ds[0])
@@ -148,3 +157,84 @@ def mirror_agreement(samples: BothMirrorSamples, normals, ds, focal_px: float) -
             "noise_px": samples.noise_px,
             "relative_difference": float(np.median(diff / ((along[0] + along[1])[good] / 2))),
             "consistent": bool(abs(median) <= AGREEMENT_LIMIT * expected_median)}
+
+
+def _one_mirror_points(det: ClipDetections, camera: Camera, normals, ds, band_px: float = 1.0):
+    """Per mirror, ``(F, T, 3)`` positions of the direct 2D tracks paired with a track of that
+    mirror (:func:`.pairing.paired_tracks` over the frames of ``det``; NaN where not seen), each
+    reconstructed through that mirror alone at its own ``ds`` (eq. 3.10-3.11)."""
+    dids, n_dt, partner, mids, ambiguous, _ = paired_tracks(det, camera, normals, band_px, min(5, det.n_frames))
+    track, blob = partner_blobs(det, dids, partner, mids)
+    out = []
+    for k in range(2):
+        sel = (blob[k] >= 0) & ~ambiguous[k, track]
+        p, pm = det.norm[0][sel], det.norm[k + 1][blob[k, sel]]
+        z, _ = depths_from_planes(p, pm[None], np.asarray(normals[k], float)[None], np.array([float(ds[k])]))
+        X = np.full((det.n_frames, n_dt, 3), np.nan)
+        X[det.frame[0][sel], track[sel]] = np.c_[p, np.ones(len(p))] * z[:, None]
+        out.append(X)
+    return out
+
+
+def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, ds, frames: int = MOTION_FRAMES,
+                                 min_markers: int = 6) -> tuple[np.ndarray, dict]:
+    """``ds`` with mirror 1's distance put in mirror 0's units through the head's motion, for rigs
+    where no marker is seen in both mirrors. Each mirror with the direct view reconstructs its own
+    markers at a scale of its own (its ``d``), about the camera centre; the head moves them all
+    with one rigid motion ``X(b) = R X(a) + t``. Between two frames ``a``, ``b`` the rotation is
+    the same for both halves whatever their scales -- fitted to both, each half about its own
+    centroid (markers deforming more than 3x the median residual left out, twice) -- while each
+    half's centroid gives its own translation ``t_k = c_k(b) - R c_k(a) = s_k t``: the ratio of the
+    scales is ``sum t_0 . t_1 / sum |t_0|^2`` over frame pairs 10 frames apart or more (anchors
+    every 5 frames) among the first ``frames``. Figures: ratio, relative_spread (sd of the
+    per-pair ratios), standard_error, samples (frame pairs), markers per mirror. Refused when the
+    head moves too little (its median translation between the pairs under ``MOTION_MIN_SHARE``
+    of its distance, or the standard error over ``MOTION_MAX_ERROR``) or a mirror shows too few
+    tracked markers."""
+    sub = det.window(0, min(frames, det.n_frames))
+    pos = _one_mirror_points(sub, camera, normals, ds)
+    seen = [np.isfinite(P[..., 0]) for P in pos]
+    t_pairs = [[], []]
+    F = sub.n_frames
+    for a in range(0, F, 5):
+        for b in range(a + 10, F, 10):
+            common = [np.flatnonzero(s[a] & s[b]) for s in seen]
+            if min(len(c) for c in common) < min_markers:
+                continue
+            A = [pos[k][a, common[k]] for k in range(2)]
+            B = [pos[k][b, common[k]] for k in range(2)]
+            keep = [np.ones(len(x), bool) for x in A]
+            for _ in range(3):
+                ca = [A[k][keep[k]].mean(0) for k in range(2)]
+                cb = [B[k][keep[k]].mean(0) for k in range(2)]
+                R, _ = rigid_fit(np.r_[tuple(A[k][keep[k]] - ca[k] for k in range(2))],
+                                 np.r_[tuple(B[k][keep[k]] - cb[k] for k in range(2))])
+                res = [np.linalg.norm((A[k] - ca[k]) @ R.T - (B[k] - cb[k]), axis=1) for k in range(2)]
+                limit = 3.0 * np.median(np.r_[res[0][keep[0]], res[1][keep[1]]])
+                keep = [r <= limit if (r <= limit).sum() >= 3 else keep[k] for k, r in enumerate(res)]
+            for k in range(2):
+                t_pairs[k].append(B[k][keep[k]].mean(0) - R @ A[k][keep[k]].mean(0))
+    markers = [int(s.any(0).sum()) for s in seen]
+    if len(t_pairs[0]) < 5:
+        raise DegenerateError(f"no marker is seen in both mirrors, and too few markers are tracked in each mirror "
+                              f"({markers[0]} and {markers[1]}) to relate the two mirrors' scales through the head's "
+                              "motion (give MIRRORS.json from `mirrorcap mirrors`)")
+    t0, t1 = np.array(t_pairs[0]), np.array(t_pairs[1])
+    depth = float(np.nanmedian(pos[0][..., 2]))
+    moved = float(np.median(np.linalg.norm(t0, axis=1)) / depth)
+    w = np.einsum("ij,ij->i", t0, t0)
+    ratio = float(np.einsum("ij,ij->", t0, t1) / w.sum())
+    per_pair = np.einsum("ij,ij->i", t0, t1) / np.maximum(w, 1e-300)
+    spread = float(np.sqrt(np.sum(w * (per_pair - ratio) ** 2) / w.sum()) / abs(ratio))
+    error = spread / np.sqrt(len(w))
+    if not (moved >= MOTION_MIN_SHARE and np.isfinite(error) and error <= MOTION_MAX_ERROR):
+        raise DegenerateError(f"no marker is seen in both mirrors, and the head moves too little in the first "
+                              f"{F} frames to relate the two mirrors' scales through its motion (it moves "
+                              f"{100 * moved:.2f} % of its distance between frames, standard error {100 * error:.2f} %); turn the head during the take or give MIRRORS.json from "
+                              "`mirrorcap mirrors`")
+    out = np.array(ds, float)
+    out[1] /= ratio
+    figures = {"source": "head motion: markers tracked in each mirror", "ratio": 1.0 / ratio,
+               "relative_spread": spread, "standard_error": float(error), "samples": int(len(w)),
+               "markers": markers}
+    return out, figures

@@ -12,7 +12,8 @@ face is put ``face_distance_mm`` (600) from the camera, which makes the units cl
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's distance was put in
 mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
-samples, markers; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
+samples, markers -- or, with no marker in both mirrors, :func:`.mirrorscale.link_mirror_scales_by_motion`,
+``source`` saying which; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
 the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px,
 relative_difference, ``consistent``: false -- with a warning -- when the median difference
@@ -121,7 +122,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``.
     ``view_check``: :func:`..capture.rig.check_view_boundaries` of the detections' view layout
     (REPORT.json ``view_layout``; a warning when a boundary runs through dots)."""
-    from .mirrorscale import both_mirror_samples, link_mirror_scales, mirror_agreement
+    from .mirrorscale import (MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
+                              link_mirror_scales_by_motion, mirror_agreement)
     from .selfcal import self_calibrate_mirror
 
     if len(frames) < 2:
@@ -135,7 +137,10 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         cals = [self_calibrate_mirror(first, camera, k) for k in range(2)]
         normals = np.stack([c.plane.normal for c in cals])
         both = both_mirror_samples(det, camera, normals)
-        ds, scale_link = link_mirror_scales(both, normals, [c.plane.d for c in cals])
+        if len(both.p) >= MIN_BOTH_MIRROR_SIGHTINGS:
+            ds, scale_link = link_mirror_scales(both, normals, [c.plane.d for c in cals])
+        else:  # the mirrors see only the sides of the face
+            ds, scale_link = link_mirror_scales_by_motion(det, camera, normals, [c.plane.d for c in cals])
         # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
         # levels are in mm, so put the face at its nominal distance: the take is then
         # "relative" units that are close to millimetres (a known length makes them exact).

@@ -41,6 +41,10 @@ from ..geometry.mirror import (
 from .candidates import _same_frame_pairs
 
 
+REFINE_ROUNDS = 50      # least-squares rounds on one-to-one pairs (eq. 3.8), ...
+CONVERGED_DEG = 1e-4    # ... until the normal moves less than this
+
+
 @dataclass
 class Candidates:
     """Same-colour direct/mirror pairs pooled over frames (normalised coordinates)."""
@@ -174,7 +178,8 @@ def self_calibrate_mirror(det: ClipDetections, camera: Camera, mirror: int, *, t
     if best_u is None:
         raise DegenerateError(f"mirror {mirror}: no mirror plane hypothesis could be formed")
     u, pairs, t_px = best_u, None, threshold_px
-    for _ in range(6):
+    for _ in range(REFINE_ROUNDS):
+        previous = u
         pairs = _one_to_one(cand_all, u, t_px / f)
         if pairs.size < 6:
             raise DegenerateError(f"mirror {mirror}: fewer than 6 consistent marker pairs; the mirror is "
@@ -184,6 +189,8 @@ def self_calibrate_mirror(det: ClipDetections, camera: Camera, mirror: int, *, t
         # residuals (robust: 1.4826 x median), so noisier detections keep their true pairs
         sigma_px = 1.4826 * np.median(epipolar_residuals(u, cand_all.p[pairs], cand_all.pm[pairs])) * f
         t_px = max(final_threshold_px, 3.0 * sigma_px, 0.5 * (t_px + final_threshold_px))
+        if np.degrees(np.arccos(min(1.0, abs(float(u @ previous))))) < CONVERGED_DEG:
+            break
     p, pm = cand_all.p[pairs], cand_all.pm[pairs]
     z, _ = depths_from_planes(p, pm[None], u[None], np.array([-1.0]))
     sign = -1.0 if np.median(z) > 0 else 1.0

@@ -265,6 +265,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
         result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit)
+        result = merge_split_labels(result, s)  # the followed dots steady the earlier marker's conjecture
     conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
         measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s, limit)
