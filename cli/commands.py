@@ -99,7 +99,7 @@ def _colours_and_light(args):
 def detect(args) -> int:
     from ..core.capture.detect import run_detection
     from ..core.capture.markers import ExtractionSettings
-    from ..core.capture.rig import load_rig
+    from ..core.capture.rig import load_rig, view_boundary_warnings
     from ..core.geometry.camera import Camera
 
     colors, light = _colours_and_light(args)
@@ -120,6 +120,8 @@ def detect(args) -> int:
         n = report["frames"]["processed"]
         print(f"{n} frames -> {args.output}: per frame {c['direct'] / n:.1f} direct, {c['mirror0'] / n:.1f} mirror0, "
               f"{c['mirror1'] / n:.1f} mirror1 ({report['frames_per_second']:.0f} frames/s)")
+        for text in view_boundary_warnings(report["view_layout"]):
+            print(f"  warning: {text}")
     return 0
 
 

@@ -204,6 +204,11 @@ def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hol
                        conjectured=take["conjectured"])
         ds = [m["d"] for m in report["mirrors"]]
         runs[name] = (report, out + err, s, ds[1] / ds[0] / (truth["mirror_d"][1] / truth["mirror_d"][0]) - 1)
+    code, out, err = _run(["detect", clip / "clip.mp4", "--frames", "0:30", "--rig", panel_edges,
+                           "-o", tmp_path / "det.csv", "-q"], capsys)
+    assert code == 0, err
+    checked = json.loads((tmp_path / "det.json").read_text())["view_layout"]
+    assert checked["crowded"] and all(b["crowded"] for b in checked["boundaries"])
     report, text, s, ratio_error = runs["panel edges"]
     assert all(b["crowded"] and b["crowding"] > 1.0 for b in report["view_layout"]["boundaries"])
     assert [b["x"] for b in report["view_layout"]["boundaries"]] == [529, 750]
@@ -238,7 +243,7 @@ def test_a_rig_whose_mirrors_share_no_marker_links_their_scales_through_head_mot
     assert code == 0, err
     report = json.loads((tmp_path / "take.json").read_text())
     link = report["mirror_scale_link"]
-    assert link["source"].startswith("head motion") and min(link["markers"]) >= 30
+    assert link["source"].startswith("head motion") and min(link["markers_per_mirror"]) >= 30
     assert link["standard_error"] < 0.002
     ds = [m["d"] for m in report["mirrors"]]
     assert ds[1] / ds[0] == pytest.approx(truth["mirror_d"][1] / truth["mirror_d"][0], rel=0.002)

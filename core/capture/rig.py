@@ -146,6 +146,20 @@ def check_view_boundaries(x, layout: ViewLayout, frames: int, dot_px: float) -> 
     return out
 
 
+def view_boundary_warnings(check: dict | None) -> list:
+    """One sentence per crowded boundary of a :func:`check_view_boundaries` result."""
+    out = []
+    for b in (check or {}).get("boundaries", []):
+        if b["crowded"]:
+            left, right = b["between"]
+            out.append(f"the view boundary at x = {b['x']:.0f} ({left} | {right}) runs through dots "
+                       f"({b['dots_per_frame']:.1f} detections per frame within a dot of it): the views touch there, "
+                       f"or the rig file's views are misplaced (the emptiest line nearby is x = {b['emptiest_x']:.0f}); "
+                       "dots on the wrong side are read as the other view's -- check the views, or move the mirrors "
+                       "out or turn them away from the face")
+    return out
+
+
 def load_rig_views(path) -> ViewLayout | None:
     """The ``views`` rectangles of a RIG.json (see module docstring); None when the file
     only names the rigid markers (the views are then split automatically)."""

@@ -187,7 +187,8 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     half's centroid gives its own translation ``t_k = c_k(b) - R c_k(a) = s_k t``: the ratio of the
     scales is ``sum t_0 . t_1 / sum |t_0|^2`` over frame pairs 10 frames apart or more (anchors
     every 5 frames) among the first ``frames``. Figures: ratio, relative_spread (sd of the
-    per-pair ratios), standard_error, samples (frame pairs), markers per mirror. Refused when the
+    per-pair ratios), standard_error, samples (frame pairs), markers (tracked through either
+    mirror) and markers_per_mirror. Refused when the
     head moves too little (its median translation between the pairs under ``MOTION_MIN_SHARE``
     of its distance, or the standard error over ``MOTION_MAX_ERROR``) or a mirror shows too few
     tracked markers."""
@@ -236,5 +237,5 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     out[1] /= ratio
     figures = {"source": "head motion: markers tracked in each mirror", "ratio": 1.0 / ratio,
                "relative_spread": spread, "standard_error": float(error), "samples": int(len(w)),
-               "markers": markers}
+               "markers": int(sum(markers)), "markers_per_mirror": markers}
     return out, figures

@@ -41,7 +41,7 @@ import time
 import numpy as np
 
 from ..capture.markers import ColorClasses, ExtractionSettings
-from ..capture.rig import ViewLayout, check_view_boundaries
+from ..capture.rig import ViewLayout, check_view_boundaries, view_boundary_warnings
 from ..capture.views import ClipDetections, FrameDets
 from ..capture.video import VideoSource
 from ..common.log import MessageLog
@@ -173,14 +173,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         units = "mm"
     rate = fps
     log = log if log is not None else MessageLog()
-    for b in (view_check or {}).get("boundaries", []):
-        if b["crowded"]:
-            left, right = b["between"]
-            log.warning(f"the view boundary at x = {b['x']:.0f} ({left} | {right}) runs through dots "
-                        f"({b['dots_per_frame']:.1f} detections per frame within a dot of it): the views touch there, "
-                        f"or the rig file's views are misplaced (the emptiest line nearby is x = {b['emptiest_x']:.0f}); "
-                        "dots on the wrong side are read as the other view's -- check the views, or move the mirrors "
-                        "out or turn them away from the face")
+    for sentence in view_boundary_warnings(view_check):
+        log.warning(sentence)
     agreement = mirror_agreement(both, np.stack([p.normal for p in planes]), np.array([p.d for p in planes]),
                                  camera.focal_px)
     if agreement["consistent"] is False:
