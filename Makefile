@@ -68,10 +68,14 @@ stress-clips: $(STAMP)
 		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
-# (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps. About 35 minutes.
+# (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps; and hd, held out (1920x1080,
+# medium skin, 180 dots of 3 mm, mirrors at 40 deg, +-14 deg yaw, 90 frames). About 45 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin dark --markers 180 --head-deg 8 10 4 \
 		--out sample_scenes/normal/dark --frames 120 --seed 22 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin medium --out sample_scenes/normal/hd --size 1920 1080 \
+		--focal 2000 --markers 180 --marker-mm 3.0 --mirror-deg 40 --distance 700 --head-deg 8 14 4 --tempo 1.3 \
+		--frames 90 --samples 4 --seed 41 --no-scan
 
