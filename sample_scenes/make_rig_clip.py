@@ -164,13 +164,10 @@ def _best_split(left_x, right_x) -> float:
     side = np.r_[np.ones(len(left_x)), np.zeros(len(right_x))]
     order = np.argsort(x, kind="stable")
     x, side = x[order], side[order]
-    # a split just after sorted position i: left_x beyond it + right_x before it
-    wrong = (side.sum() - np.cumsum(side)) + np.cumsum(1 - side)
-    gap = np.diff(x)
-    wrong, gap = wrong[:-1], gap
-    best = wrong.min()
-    cand = np.flatnonzero(wrong == best)
-    i = cand[np.argmax(gap[cand])]
+    # a split between sorted positions i and i + 1: the left_x after it plus the right_x up to it
+    wrong = ((side.sum() - np.cumsum(side)) + np.cumsum(1 - side))[:-1]
+    cand = np.flatnonzero(wrong == wrong.min())
+    i = cand[np.argmax(np.diff(x)[cand])]
     return 0.5 * (x[i] + x[i + 1])
 
 

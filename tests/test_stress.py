@@ -287,3 +287,23 @@ def test_the_head_motion_link_matches_the_shared_marker_link_and_refuses_a_still
     still = ClipDetections.of([frames[0]] * 40, camera)
     with pytest.raises(DegenerateError, match="moves too little"):
         link_mirror_scales_by_motion(still, camera, normals, ds)
+
+
+def test_the_clip_makers_view_split_puts_the_fewest_dots_in_the_wrong_view():
+    """sample_scenes/make_rig_clip.py's view lines (the mirror45 and dense clips' views had been cut at
+    the mirror panels' edges, through the face): each line is where the fewest of one view's dots land
+    on the other's side, in the middle of the widest such stretch."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location("make_rig_clip", ROOT / "sample_scenes" / "make_rig_clip.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["make_rig_clip"] = module
+    try:
+        spec.loader.exec_module(module)
+        split = module._best_split
+        assert split(np.array([1.0, 2, 3]), np.array([5.0, 6, 7])) == 4.0        # a clean gap: its middle
+        assert split(np.array([1.0, 2, 5.5]), np.array([5.0, 6, 7])) == 3.5      # one dot astray either way:
+        assert split(np.array([1.0, 2, 5.5, 5.6]), np.array([5.0, 6, 7])) == pytest.approx(5.8)  # fewest astray
+    finally:
+        sys.modules.pop("make_rig_clip", None)
