@@ -175,6 +175,9 @@ def test_the_sample_clip_reports_its_seen_markers(tmp_path, capsys):
           f"{s['identity_switches']} switches, max {np.nanmax(err_mm):.2f} mm")
     assert s["seen_reported_fraction"] >= 0.99
     assert s["identity_switches"] == 0 and np.nanmax(err_mm) < 2.0
+    # its one split label (a lower-lip marker behind the upper lip for 8 frames while the mouth moved
+    # 8 mm sideways; mirror 1 kept the dot) merges along that mirror's 2D track (late.merge_along_2d_tracks)
+    assert s["split_markers"] == 0
 
 
 def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hold(tmp_path, capsys):

@@ -261,6 +261,47 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
     return merge_labels(result, pairs)
 
 
+def merge_along_2d_tracks(result: TrackResult, mirror_track) -> TrackResult:
+    """Offline, a later chain of a marker merged back where a mirror kept the dot in view: the
+    earlier label's last measurement before the later label's first and that first measurement
+    sit on one unbroken 2D track of the same mirror (:func:`.pairing.track_2d`, per view over the
+    clip; ``mirror_track`` ``(C, K)``: each clip candidate's track per mirror, -1 none). Such a gap
+    is the direct view's alone -- a lower lip behind the upper one while the mouth moves sideways
+    8 mm in as many frames, which the neighbour relations cannot follow. Guards: the two labels
+    are never measured in the same frame, their neutral positions lie within
+    :data:`MERGE_SEARCH_MM`, no label measures that track in between, and only one earlier label
+    ends on it."""
+    cand = result.candidate
+    if cand is None or mirror_track is None or len(mirror_track) == 0:
+        return result
+    measured = (result.assigned_blob >= 0) & (cand >= 0)
+    F, N = measured.shape
+    K = mirror_track.shape[1]
+    track = np.where(measured[..., None], mirror_track[np.maximum(cand, 0)], -1)   # (F, N, K)
+    near, _ = neighbours(result.neutral, MERGE_SEARCH_MM)
+    first = np.where(measured.any(axis=0), np.argmax(measured, axis=0), F)
+    pairs = []
+    for b in np.flatnonzero((first > 0) & (first < F)):
+        fb = first[b]
+        found = set()
+        for k in range(K):
+            tk = track[fb, b, k]
+            if tk < 0:
+                continue
+            before = track[:fb, :, k] == tk                        # (fb, N): labels on the track earlier
+            ended = [a for a in np.flatnonzero(before.any(axis=0)) if a != b]
+            for a in ended:
+                fa = np.flatnonzero(measured[:fb, a])[-1]           # a's last measurement before b's first
+                if track[fa, a, k] != tk or (measured[:, a] & measured[:, b]).any() or a not in near[b]:
+                    continue
+                if (track[fa + 1:fb, :, k] == tk).any():           # someone measured the track in between
+                    continue
+                found.add(int(a))
+        if len(found) == 1:
+            pairs.append((found.pop(), int(b)))
+    return merge_labels(result, pairs)
+
+
 def merge_labels(result: TrackResult, pairs) -> TrackResult:
     """Each ``(a, b)`` of ``pairs``: label ``b``'s measurements become label ``a``'s and ``b`` goes
     (two labels of one dot, never measured in the same frame); a label already merged away is

@@ -42,7 +42,7 @@ from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
-from .late import add_late_markers, merge_split_labels
+from .late import add_late_markers, merge_along_2d_tracks, merge_split_labels
 from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
 from .motion import (
     RELATION_CORRELATION,
@@ -261,6 +261,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
     result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     result = merge_split_labels(result, s)
+    result = merge_along_2d_tracks(result, _candidate_tracks(det, cands)[1] if s.follow_2d_tracks else None)
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
@@ -439,6 +440,8 @@ def _candidate_tracks(det: ClipDetections, cands: ClipCandidates):
     candidate's direct blob ``(C,)`` and mirror blobs ``(C, K)`` (-1: no blob in that mirror)."""
     from .pairing import track_2d
 
+    if "_tracks" in cands.__dict__:
+        return cands.__dict__["_tracks"]
     K = cands.mirror_blob.shape[1]
     ids = [np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
            if len(det.xy[v]) else np.zeros(0, int) for v in range(K + 1)]
@@ -447,6 +450,7 @@ def _candidate_tracks(det: ClipDetections, cands: ClipCandidates):
     for k in range(K):
         has = cands.mirror_blob[:, k] >= 0
         mtrack[has, k] = ids[k + 1][cands.mirror_blob[has, k]]
+    cands.__dict__["_tracks"] = (dtrack, mtrack)      # the final pass and the merge read them
     return dtrack, mtrack
 
 
