@@ -265,3 +265,22 @@ def test_fragments_merge_within_the_frames_typical_dot():
     assert len(auto) == len(centres) == 200
     assert len(fixed) == 100
     assert np.allclose(np.sort(auto.x), np.sort([c[0] for c in centres]), atol=1e-6)
+
+
+def test_a_clump_of_two_colours_splits_by_pixel_class_when_asked():
+    """ExtractionSettings(split_clumps=True) (off by default: measured and not kept, README): a blob of
+    two touching dots of two colours, twice a typical dot's area and elongated, comes back as two dots
+    near their centres; by default it stays one blob."""
+    img = np.zeros((200, 300, 3), np.uint8)
+    yy, xx = np.mgrid[0:200, 0:300]
+    for i in range(12):                                   # typical dots, apart
+        cx, cy = 20 + 22 * i, 30
+        img[(xx - cx) ** 2 + (yy - cy) ** 2 <= 9] = CLASS_RGB[i % 2][::-1]
+    for cx, k in ((100, 2), (106, 3)):                    # touching, dark blue and purple: the mix is no paler
+        img[(xx - cx) ** 2 + (yy - 120) ** 2 <= 9] = CLASS_RGB[k][::-1]
+    whole = mk.extract_markers(img, mk.ColorClasses.default())
+    split = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(split_clumps=True))
+    assert len(whole) == 13 and len(split) == 14
+    pair = split.y > 100
+    assert np.allclose(np.sort(split.x[pair]), [100, 106], atol=0.6)
+    assert sorted(split.color[pair].tolist()) == [2, 3]

@@ -182,6 +182,7 @@ class ExtractionSettings:
     pale_saturation: float = 0.2  # blob test: paler than this ...
     max_elongation: float = 2.0  # ... and longer than this many times its width is not a marker
     split_pale_blobs: bool = False  # split such a blob by per-pixel class and keep its saturated parts
+    split_clumps: bool = False  # split a blob of 1.8x a typical dot's area, elongated, by per-pixel class
     # normal light (.colordots)
     min_difference: int = 20  # levels in some channel from the local background (first cut)
     min_contrast: float = 0.05  # chromaticity distance from the local background
@@ -198,6 +199,7 @@ class ExtractionSettings:
             raise InputError(f"light must be one of {', '.join(LIGHTS)}, not {self.light!r}")
 
 
+CLUMP_AREA = 1.8  # a clump of touching dots: at least this many times the frame's median blob area
 MAX_MERGE_PX = 6.0  # fragments of one marker lie within a dot of each other, and at most this far apart
 
 
@@ -290,7 +292,15 @@ class MarkerExtractor:
         cx, cy, elongation, rgb, saturation = blob_shape(sums)
         odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
         keep = (sums[:, 3] >= s.min_area) & ~odd
-        if odd.any() and s.split_pale_blobs:
+        split = odd if s.split_pale_blobs else np.zeros_like(odd)
+        if s.split_clumps and sums.shape[0] >= 10:
+            # a clump: twice a typical dot's area and elongated -- dots of several colours touching
+            # at a mirror image's foreshortened edge; split by the class of each pixel like a pale blob
+            clump = (sums[:, 3] >= CLUMP_AREA * np.median(sums[:, 3])) & (elongation > s.max_elongation) & ~odd
+            split = split | clump
+            keep &= ~clump
+        if split.any():
+            odd = split
             pix = np.flatnonzero(odd[group][lab - 1] & (lab > 0))
             pc = self.colors.classify(np.c_[r[pix], g[pix], b[pix]])
             key = group[lab[pix] - 1] * len(self.colors.names) + pc
