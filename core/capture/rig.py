@@ -30,6 +30,7 @@ class ViewLayout:
 
     boundaries: tuple | None = None  # (b0, b1): x < b0 mirror0, b0 <= x < b1 direct, x >= b1 mirror1
     regions: dict = field(default_factory=dict)  # view name -> (x0, y0, x1, y1)
+    note: str | None = None  # how an automatic split was made when the views touch (for the user)
 
     def assign(self, x, y) -> np.ndarray:
         """View index per detection: 0 direct, 1 mirror0, 2 mirror1, -1 outside every region."""
@@ -48,7 +49,7 @@ class ViewLayout:
     def to_dict(self) -> dict:
         if self.regions:
             return {"views": {k: list(v) for k, v in self.regions.items()}}
-        return {"boundaries_x": list(self.boundaries)}
+        return {"boundaries_x": list(self.boundaries), **({"note": self.note} if self.note else {})}
 
 
 def split_views_by_gaps(x, min_gap_px: float, stray_fraction: float = 0.01, min_view_fraction: float = 0.1) -> ViewLayout:
@@ -56,9 +57,11 @@ def split_views_by_gaps(x, min_gap_px: float, stray_fraction: float = 0.01, min_
     mirror0 | direct | mirror1. A gap may hold a few stray detections (at most
     ``stray_fraction`` of them: markers at the very edge of a view, an ear beside a mirror
     image that nearly touches it); each view must keep ``min_view_fraction`` of the detections.
-    Within each gap the boundary is the middle of its widest empty stretch. Refuses when either
-    gap is under ``min_gap_px`` (with strays: under four times the typical span of as many
-    detections, so that evenly spread detections show no gap)."""
+    Within each gap the boundary is the middle of its widest empty stretch. Without such gaps (the
+    views touch) the emptiest lines are taken (:func:`_valley_split`, with a ``note`` for the
+    user); refuses when there are none either: either gap under ``min_gap_px`` (with strays:
+    under four times the typical span of as many detections) and no line emptier than
+    ``VALLEY_MAX`` of the views' density (evenly spread detections show no views)."""
     xs = np.sort(np.asarray(x, dtype=float))
     n = xs.size
     if n < 6:
@@ -84,6 +87,9 @@ def split_views_by_gaps(x, min_gap_px: float, stray_fraction: float = 0.01, min_
         if best is not None and best[3] == 0 and best[0] >= 1.0:
             break                                             # clean gaps: no strays needed
     if best is None or best[0] < 1.0:
+        valleys = _valley_split(xs, 0.5 * min_gap_px, min_view_fraction)
+        if valleys is not None:
+            return valleys
         w = np.sort(gaps)[-2:] if gaps.size >= 2 else gaps
         raise InputError(
             "cannot split the direct and mirror views automatically: no clear gap between them "
@@ -147,8 +153,9 @@ def check_view_boundaries(x, layout: ViewLayout, frames: int, dot_px: float) -> 
 
 
 def view_boundary_warnings(check: dict | None) -> list:
-    """One sentence per crowded boundary of a :func:`check_view_boundaries` result."""
-    out = []
+    """One sentence per crowded boundary of a :func:`check_view_boundaries` result, after the
+    automatic split's ``note`` when it had to split views that touch."""
+    out = [check["note"]] if check and check.get("note") else []
     for b in (check or {}).get("boundaries", []):
         if b["crowded"]:
             left, right = b["between"]
@@ -158,6 +165,46 @@ def view_boundary_warnings(check: dict | None) -> list:
                        "dots on the wrong side are read as the other view's -- check the views, or move the mirrors "
                        "out or turn them away from the face")
     return out
+
+
+VALLEY_MAX = 0.35  # an automatic split where the views touch: its lines at most this share of a view's density
+
+
+def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | None:
+    """Where the views touch (no empty gap, e.g. mirrors turned 45 deg towards the face, the cheeks in
+    front of them): the two emptiest lines -- the fewest detections within ``half_px`` -- that leave
+    each view ``min_view_fraction`` of the sorted detections ``xs``; each in the middle of its run of
+    equally empty lines. None when even they hold over ``VALLEY_MAX`` of a view's typical density
+    (evenly spread detections: no views to find)."""
+    half = max(float(half_px), 2.0)
+    centres = np.arange(np.floor(xs[0]), np.ceil(xs[-1]) + 1.0)
+    counts = np.searchsorted(xs, centres + half) - np.searchsorted(xs, centres - half)
+    typical = float(np.median(counts[counts > 0]))
+    share = np.searchsorted(xs, centres) / xs.size            # detections left of each line
+    f = min_view_fraction
+    best = None
+    for i in np.flatnonzero((share >= f) & (share <= 1.0 - 2.0 * f)):
+        j = np.flatnonzero((share >= share[i] + f) & (share <= 1.0 - f))
+        if j.size:
+            j = j[np.argmin(counts[j])]
+            if best is None or counts[i] + counts[j] < best[0]:
+                best = (counts[i] + counts[j], i, j)
+    if best is None or best[0] / 2.0 > VALLEY_MAX * typical:
+        return None
+
+    def middle(k):                                            # the middle of the run of equal counts
+        lo = hi = k
+        while lo > 0 and counts[lo - 1] == counts[k]:
+            lo -= 1
+        while hi + 1 < len(counts) and counts[hi + 1] == counts[k]:
+            hi += 1
+        return float(0.5 * (centres[lo] + centres[hi]))
+
+    b0, b1 = middle(best[1]), middle(best[2])
+    return ViewLayout(boundaries=(b0, b1), note=(
+        f"no empty gap between the views: split at the emptiest lines x = {b0:.0f} and {b1:.0f} "
+        f"({best[0] / 2.0 / typical:.2f} of a view's dot density there); dots near them may be read in the wrong "
+        "view -- give a rig file with --rig to place the views yourself"))
 
 
 def load_rig_views(path) -> ViewLayout | None:
