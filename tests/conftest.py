@@ -67,3 +67,26 @@ def write_rig_clip(root: Path, n_frames: int, name: str = "{:03d}.png", mp4=None
         writer.release()
     (root / "camera.json").write_text(json.dumps(rig.camera.to_dict()))
     return rig, truths
+
+
+def scored_take(clip: Path, take_path: Path, report_path: Path | None = None):
+    """A take tracked from a rendered clip (``clip``: camera.json, truth.npz), scored against the
+    clip's truth after one similarity (:func:`synthetic.evaluate.score_take`, with the marker-frames
+    seen in the direct view and a mirror). Returns the scores, the report (or None) and the error
+    of the mirrors' distance ratio against the truth (or None)."""
+    import json
+
+    from mirrorcap.core.take.c3d import read_c3d
+    from mirrorcap.synthetic.evaluate import score_take
+
+    truth = np.load(clip / "truth.npz")
+    take = read_c3d(take_path)
+    F = take["points"].shape[0]
+    vis = truth["visible"][:F]
+    scores = score_take(take["points"], truth["points"][:F], Camera.load(clip / "camera.json"),
+                        conjectured=take["conjectured"], seen=vis[:, 0] & (vis[:, 1] | vis[:, 2]))
+    if report_path is None:
+        return scores, None, None
+    report = json.loads(Path(report_path).read_text())
+    ds = [m["d"] for m in report["mirrors"]]
+    return scores, report, ds[1] / ds[0] / (truth["mirror_d"][1] / truth["mirror_d"][0]) - 1.0

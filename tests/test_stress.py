@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import scored_take
 from mirrorcap.cli import parser as cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -187,26 +188,18 @@ def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hol
     With those views the take was silently wrong (mirror 1 0.41 deg off, 50 switches); now REPORT.json
     and the command line say the boundaries run through dots. With the views split where the fewest dots cross
     (the clip maker's rig.json now), self-calibration holds: 0 switches, 0.22 mm RMS, scales 0.02 % apart."""
-    from mirrorcap.core.geometry.camera import Camera
-    from mirrorcap.core.take.c3d import read_c3d
-    from mirrorcap.synthetic.evaluate import score_take
 
     clip = ROOT / "sample_scenes" / "stress" / "mirror45"
     panel_edges = tmp_path / "panel_edges.json"
     panel_edges.write_text(json.dumps({"views": {"mirror0": [0, 0, 529, 720], "direct": [529, 0, 750, 720],
                                                  "mirror1": [750, 0, 1280, 720]}}))
-    truth = np.load(clip / "truth.npz")
     runs = {}
     for name, rig in (("panel edges", panel_edges), ("clip", clip / "rig.json")):
         code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", rig,
                                "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
         assert code == 0, err
-        report = json.loads((tmp_path / "take.json").read_text())
-        take = read_c3d(tmp_path / "take.c3d")
-        s = score_take(take["points"], truth["points"], Camera.load(clip / "camera.json"),
-                       conjectured=take["conjectured"])
-        ds = [m["d"] for m in report["mirrors"]]
-        runs[name] = (report, out + err, s, ds[1] / ds[0] / (truth["mirror_d"][1] / truth["mirror_d"][0]) - 1)
+        s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
+        runs[name] = (report, out + err, s, ratio_error)
     code, out, err = _run(["detect", clip / "clip.mp4", "--frames", "0:30", "--rig", panel_edges,
                            "-o", tmp_path / "det.csv", "-q"], capsys)
     assert code == 0, err
@@ -234,9 +227,6 @@ def test_a_rig_whose_mirrors_share_no_marker_links_their_scales_through_head_mot
     scales 0.07 % apart from the truth, 0 switches, 0.32 mm RMS (0.31 mm with the true planes).
     Self-calibration's least squares now runs to convergence: 6 rounds had left the normals 0.08 and
     0.13 deg off on this clip (30 switches, 1.04 mm RMS); converged, 0.02 deg."""
-    from mirrorcap.core.geometry.camera import Camera
-    from mirrorcap.core.take.c3d import read_c3d
-    from mirrorcap.synthetic.evaluate import score_take
 
     clip = ROOT / "sample_scenes" / "stress" / "mirror35"
     truth = np.load(clip / "truth.npz")
@@ -244,17 +234,14 @@ def test_a_rig_whose_mirrors_share_no_marker_links_their_scales_through_head_mot
     code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", clip / "rig.json",
                            "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
     assert code == 0, err
-    report = json.loads((tmp_path / "take.json").read_text())
+    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
     link = report["mirror_scale_link"]
     assert link["source"].startswith("head motion") and min(link["markers_per_mirror"]) >= 30
     assert link["standard_error"] < 0.002
-    ds = [m["d"] for m in report["mirrors"]]
-    assert ds[1] / ds[0] == pytest.approx(truth["mirror_d"][1] / truth["mirror_d"][0], rel=0.002)
+    assert abs(ratio_error) < 0.002
     normals = [np.array(m["normal"]) for m in report["mirrors"]]
     for n, n_true in zip(normals, truth["mirror_normals"]):
         assert np.degrees(np.arccos(min(1.0, abs(n @ n_true)))) < 0.05
-    take = read_c3d(tmp_path / "take.c3d")
-    s = score_take(take["points"], truth["points"], Camera.load(clip / "camera.json"), conjectured=take["conjectured"])
     assert s["identity_switches"] == 0 and s["markers_matched"] == s["markers_tracked"] >= 100
     assert s["rms_mm"] < 0.4
 
@@ -342,23 +329,14 @@ def test_held_out_turning_head_without_a_rig_file(tmp_path, capsys):
     and says so; the take holds -- 0 switches, 0.31 mm RMS, 96.2 % of the seen marker-frames reported,
     the mirrors' scales 0.02 % apart. (Its one bad marker: a direct dot whose mirror images are both
     hidden, paired for 31 frames with another marker's image on its epipolar line, 7.9 mm off.)"""
-    from mirrorcap.core.geometry.camera import Camera
-    from mirrorcap.core.take.c3d import read_c3d
-    from mirrorcap.synthetic.evaluate import score_take
 
     clip = ROOT / "sample_scenes" / "stress" / "turn"
     code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "-o", tmp_path / "take.c3d",
                            "--report", tmp_path / "take.json"], capsys)
     assert code == 0, err
-    report = json.loads((tmp_path / "take.json").read_text())
+    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
     assert "no empty gap between the views" in out + err and report["view_layout"]["note"]
-    truth = np.load(clip / "truth.npz")
-    ds = [m["d"] for m in report["mirrors"]]
-    assert ds[1] / ds[0] == pytest.approx(truth["mirror_d"][1] / truth["mirror_d"][0], rel=0.002)
-    take = read_c3d(tmp_path / "take.c3d")
-    vis = truth["visible"]
-    s = score_take(take["points"], truth["points"], Camera.load(clip / "camera.json"), conjectured=take["conjectured"],
-                   seen=vis[:, 0] & (vis[:, 1] | vis[:, 2]))
+    assert abs(ratio_error) < 0.002
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_tracked"] >= 150
     assert s["rms_mm"] < 0.35
     assert s["seen_reported_fraction"] > 0.95
