@@ -222,6 +222,10 @@ def stress_summary(stress) -> list:
              "| seen marker-frames reported | never tracked | mirror ratio error | frames/s |",
              "| --- |" + " --- |" * 10]
     for name, r in stress.items():
+        if "refused" in r:
+            lines.append(f"| {name} ({r['size'][0]}x{r['size'][1]}) | {r['frames']} | refused: {r['refused']} |"
+                         + " |" * 8)
+            continue
         seen = r.get("seen_reported_fraction")
         lines.append(f"| {name} ({r['size'][0]}x{r['size'][1]}) | {r['frames']} | {r['markers']} ({r['markers_true']}) "
                      f"| {r['rms_mm']:.2f} / {r['p95_mm']:.2f} / {r['max_mm']:.1f} mm | {r['points_over_2mm']} | "

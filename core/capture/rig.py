@@ -175,7 +175,9 @@ def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | 
     front of them): the two emptiest lines -- the fewest detections within ``half_px`` -- that leave
     each view ``min_view_fraction`` of the sorted detections ``xs``; each in the middle of its run of
     equally empty lines. None when even they hold over ``VALLEY_MAX`` of a view's typical density
-    (evenly spread detections: no views to find)."""
+    (evenly spread detections: no views to find), or when another line inside the views, more than
+    four dots from both, is as empty as the emptier of them (sparse markers leave empty columns
+    within a view: the split would be a guess)."""
     half = max(float(half_px), 2.0)
     centres = np.arange(np.floor(xs[0]), np.ceil(xs[-1]) + 1.0)
     counts = np.searchsorted(xs, centres + half) - np.searchsorted(xs, centres - half)
@@ -190,6 +192,13 @@ def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | 
             if best is None or counts[i] + counts[j] < best[0]:
                 best = (counts[i] + counts[j], i, j)
     if best is None or best[0] / 2.0 > VALLEY_MAX * typical:
+        return None
+    # the lines must stand out: another line inside the views as empty as the emptier of the two
+    # (sparse markers leave empty columns within a view) makes the split a guess
+    inner = (share >= f) & (share <= 1.0 - f)
+    empty = inner & (counts <= min(counts[best[1]], counts[best[2]]))
+    near_chosen = (np.abs(centres - centres[best[1]]) <= 4.0 * half) | (np.abs(centres - centres[best[2]]) <= 4.0 * half)
+    if (empty & ~near_chosen).any():
         return None
 
     def middle(k):                                            # the middle of the run of equal counts

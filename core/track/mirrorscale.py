@@ -40,6 +40,8 @@ MOTION_FRAMES = 300      # head-motion link: the first frames of the clip it rea
 MOTION_MAX_ERROR = 0.005  # ... refused when its standard error exceeds 0.5 % (too little head motion)
 MOTION_MIN_SHARE = 0.005  # ... or when the head's translation between frames is under 0.5 % of its distance
                           # (the clips move 2-17 %; a still head moves 0)
+MOTION_MAX_SPREAD = 0.01  # ... or when the frame pairs' ratios spread by more than 1 % (0.1-0.4 % on the clips
+                          # that link; 2.2 % on one with 20 markers per mirror, whose ratio came out 1.6 % off)
 
 
 @dataclass
@@ -190,8 +192,10 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     per-pair ratios), standard_error, samples (frame pairs), markers (tracked through either
     mirror) and markers_per_mirror. Refused when the
     head moves too little (its median translation between the pairs under ``MOTION_MIN_SHARE``
-    of its distance, or the standard error over ``MOTION_MAX_ERROR``) or a mirror shows too few
-    tracked markers."""
+    of its distance, or the standard error over ``MOTION_MAX_ERROR``), when the halves do not move
+    together closely enough (the per-pair ratios spread over ``MOTION_MAX_SPREAD``: few markers
+    per mirror, most of them moving with the expressions), or a mirror shows too few tracked
+    markers."""
     sub = det.window(0, min(frames, det.n_frames))
     pos = _one_mirror_points(sub, camera, normals, ds)
     seen = [np.isfinite(P[..., 0]) for P in pos]
@@ -228,6 +232,11 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     per_pair = np.einsum("ij,ij->i", t0, t1) / np.maximum(w, 1e-300)
     spread = float(np.sqrt(np.sum(w * (per_pair - ratio) ** 2) / w.sum()) / abs(ratio))
     error = spread / np.sqrt(len(w))
+    if moved >= MOTION_MIN_SHARE and np.isfinite(error) and spread > MOTION_MAX_SPREAD:
+        raise DegenerateError(f"no marker is seen in both mirrors, and the two halves of the face the mirrors see "
+                              f"({markers[0]} and {markers[1]} markers) do not move together closely enough to relate "
+                              f"the two mirrors' scales through the head's motion (the frame pairs disagree by "
+                              f"{100 * spread:.1f} %); give MIRRORS.json from `mirrorcap mirrors`")
     if not (moved >= MOTION_MIN_SHARE and np.isfinite(error) and error <= MOTION_MAX_ERROR):
         raise DegenerateError(f"no marker is seen in both mirrors, and the head moves too little in the first "
                               f"{F} frames to relate the two mirrors' scales through its motion (it moves "
