@@ -13,7 +13,7 @@ REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's distance was put in
 mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
 samples, markers -- or, with no marker in both mirrors, :func:`.mirrorscale.link_mirror_scales_by_motion`,
-``source`` saying which; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
+which adds markers_per_mirror; ``source`` says which; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
 the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px,
 relative_difference, ``consistent``: false -- with a warning -- when the median difference
@@ -21,7 +21,8 @@ exceeds twice the expected sd; null when too few markers are seen in both); ``vi
 (:func:`..capture.rig.check_view_boundaries`: per boundary between views its ``x``, the views
 ``between`` it, ``dots_per_frame`` within a dot of it, ``crowding`` -- the detection density there
 over a view's --, the ``emptiest_x`` line nearby and its ``emptiest_crowding``, and ``crowded``, with a
-warning; null for detections given without a layout); ``frames`` (first, last, step, count, fps); ``markers`` (count,
+warning; ``note`` when the automatic split had to take the emptiest lines, the views touching; null for
+detections given without a layout); ``frames`` (first, last, step, count, fps); ``markers`` (count,
 labels, the rigid markers that carried the head pose and ``rigid_source``: "rig file",
 "settings" (the add-on's) or "automatic"; ``undecided``: direct-view markers of the first frames that could not be
 paired with a mirror image and were not found later, each with the frame and pixel position
