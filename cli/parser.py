@@ -150,8 +150,8 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument("--threshold", type=float, default=60.0, help="brightness threshold on max(R,G,B), 0..254")
     det.add_argument("--min-area", type=int, default=4, help="smallest marker in pixels (default 4)")
     det.add_argument("--marker-diameter", type=float, default=None,
-                     help="fragments of one colour closer than this many pixels merge (default: 3/4 of each "
-                          "frame's typical dot, the diameter of a disc of the median blob area)")
+                     help="fragments of one colour closer than this many pixels merge (default: each frame's "
+                          "typical dot -- the diameter of a disc of its median blob area -- at most 6)")
     det.set_defaults(func=commands.detect)
 
     trk = sub.add_parser("track", help="labelled 3D marker trajectories from a rig video (C3D)",

@@ -192,20 +192,23 @@ def mirror_panels(spec: ClipSpec) -> list:
 
 
 def marker_visibility(camera: Camera, planes, panels, skin_vertices, skin_triangles, centres,
-                      normals, max_deg: float = VISIBLE_DEG) -> np.ndarray:
-    """``(3, M)`` bool for one frame: marker seen in the direct view, mirror 0, mirror 1.
+                      normals, max_deg=(VISIBLE_DEG,)) -> np.ndarray:
+    """``(A, 3, M)`` bool for one frame, one row per angle of ``max_deg``: marker seen in the direct
+    view, mirror 0, mirror 1.
 
     A marker is seen in a view when its skin faces that view's (real or mirrored) camera within
-    ``max_deg`` (:func:`synthetic.simulate.visibility`), in a mirror the reflection point lies on the
+    the angle (:func:`synthetic.simulate.visibility`), in a mirror the reflection point lies on the
     panel (``panels``, from
     :func:`mirror_panels`), and the light path to the camera misses the head (Blender's BVH ray
-    cast: the marker to the mirror and the mirror to the camera). Camera frame, mm."""
+    cast: the marker to the mirror and the mirror to the camera; cast once per marker and path, for
+    every angle). Camera frame, mm."""
     from mathutils import Vector
     from mathutils.bvhtree import BVHTree
 
     bvh = BVHTree.FromPolygons(np.asarray(skin_vertices, float).tolist(), np.asarray(skin_triangles).tolist())
     P = np.asarray(centres, float)
-    out = visibility(camera, planes, P, normals, grazing_deg=max_deg)
+    facing = np.stack([visibility(camera, planes, P, normals, grazing_deg=deg) for deg in max_deg])
+    out = facing.any(axis=0)                              # the widest angle's candidates, cast once
 
     def clear(a, b) -> bool:                              # the segment a -> b misses the head
         v = b - a
@@ -223,7 +226,7 @@ def marker_visibility(camera: Camera, planes, panels, skin_vertices, skin_triang
         a, b = (hit - panel[0]) @ u / (u @ u), (hit - panel[0]) @ w / (w @ w)
         out[1 + k] &= (s > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
         out[1 + k] = [c and clear(p, h) and clear(h, origin) for c, p, h in zip(out[1 + k], P, hit)]
-    return out
+    return facing & out[None]
 
 
 def inside_views(camera: Camera, planes, points, layout: ViewLayout) -> np.ndarray:
@@ -524,10 +527,8 @@ def main(argv=None) -> int:
         cam_v = q @ R[f].T + t[f]
         points[f] = centre_q @ R[f].T + t[f]
         if args.preview is None:
-            visible[f] = marker_visibility(camera, planes, panels, cam_v, skin_T, points[f],
-                                           normals[verts] @ R[f].T)
-            imaged[f] = marker_visibility(camera, planes, panels, cam_v, skin_T, points[f],
-                                          normals[verts] @ R[f].T, max_deg=IMAGED_DEG)
+            visible[f], imaged[f] = marker_visibility(camera, planes, panels, cam_v, skin_T, points[f],
+                                                      normals[verts] @ R[f].T, max_deg=(VISIBLE_DEG, IMAGED_DEG))
         if f not in frames:
             continue
         png = cache / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"

@@ -47,11 +47,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..common.errors import InputError
-from .detections import Detections, blob_shape, empty_detections, merge_fragments
+from .detections import MAX_DOT_PX, Detections, blob_shape, empty_detections, merge_fragments
 
 BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times smaller
 LEARN_FROM_SKIN_DEG = 15.0  # learning classes: a dot's hue differs from the skin around it by this much
-MAX_DOT_PX = 6.0  # a dot's diameter when ExtractionSettings.marker_diameter_px is not given
 
 
 def hue_saturation(rgb) -> tuple:

@@ -29,8 +29,8 @@ from ..common.errors import InputError
 from ..common.files import default_file_mode, write_files_atomically
 from ..common.log import FrameProgress
 from ..geometry.camera import Camera
-from .detections import typical_dot_diameter_px
-from .markers import MAX_MERGE_PX, ColorClasses, ExtractionSettings, marker_extractor
+from .detections import MAX_DOT_PX, typical_dot_diameter_px
+from .markers import ColorClasses, ExtractionSettings, marker_extractor
 from .rig import VIEW_NAMES, ViewLayout, check_view_boundaries, split_views_by_gaps
 from .video import VideoSource
 
@@ -87,13 +87,13 @@ def _layout_from(pending, settings: ExtractionSettings, source: VideoSource) -> 
 def dot_diameter_px(settings: ExtractionSettings, detections) -> float:
     """A dot's diameter in pixels: ``settings.marker_diameter_px`` when given, else the typical dot
     (:func:`.detections.typical_dot_diameter_px`) of the blobs of ``detections`` (a list of
-    :class:`.detections.Detections`), at most ``MAX_MERGE_PX`` -- as the extractor merges fragments
+    :class:`.detections.Detections`), at most ``MAX_DOT_PX`` -- as the extractor merges fragments
     (:func:`.markers.merge_marker_fragments`)."""
     if settings.marker_diameter_px is not None:
         return float(settings.marker_diameter_px)
     areas = np.concatenate([np.asarray(d.area, float) for d in detections]) if detections else np.zeros(0)
     dot = typical_dot_diameter_px(areas)
-    return min(dot, MAX_MERGE_PX) if dot > 0 else MAX_MERGE_PX
+    return min(dot, MAX_DOT_PX) if dot > 0 else MAX_DOT_PX
 
 
 def _nothing_found_hint(settings: ExtractionSettings) -> str:
@@ -212,8 +212,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
                        "frame_count": source.frame_count, "size": list(source.size)},
             "frames": {"start": start, "end": end_eff, "step": step, "processed": done},
             "layout": layout.to_dict(),
-            "view_layout": {**check_view_boundaries(np.concatenate(xs), layout, done, stream.dot_px or 0.0),
-                            **({"note": layout.note} if layout.note else {})},
+            "view_layout": check_view_boundaries(np.concatenate(xs), layout, done, stream.dot_px or 0.0),
             "colors": colors.to_dict(),
             "settings": asdict(settings),
             "counts": {**{v: int(c) for v, c in zip(VIEW_NAMES, counts)}, "outside_views": int(counts[-1])},

@@ -30,6 +30,10 @@ def empty_detections() -> Detections:
                       np.zeros((0, 3)), np.zeros(0))
 
 
+MAX_DOT_PX = 6.0  # a dot's diameter when ExtractionSettings.marker_diameter_px is not given, and the most
+# the typical dot may set it to: fragments of one marker lie within a dot of each other, at most this far
+
+
 def typical_dot_diameter_px(areas) -> float:
     """The diameter of a disc of the median blob area (pixels): a frame's typical dot. 0 without blobs."""
     areas = np.asarray(areas, float)

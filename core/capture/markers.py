@@ -57,7 +57,7 @@ import numpy as np
 
 from ..common.errors import InputError
 from ..common.files import read_json
-from .detections import Detections, blob_shape, empty_detections, merge_fragments, typical_dot_diameter_px
+from .detections import MAX_DOT_PX, Detections, blob_shape, empty_detections, merge_fragments, typical_dot_diameter_px
 
 LIGHTS = ("uv", "normal")  # fluorescent markers under black light; coloured dots under ordinary lamps
 
@@ -178,7 +178,7 @@ class ExtractionSettings:
     threshold: float = 60.0  # on max(R, G, B), 0..255
     min_area: int = 4  # pixels; smaller markers are specks
     marker_diameter_px: float | None = None  # merge distance for fragments of one marker; None: each frame's
-    # typical dot, at most MAX_MERGE_PX (merge_marker_fragments)
+    # typical dot, at most MAX_DOT_PX (merge_marker_fragments)
     pale_saturation: float = 0.2  # blob test: paler than this ...
     max_elongation: float = 2.0  # ... and longer than this many times its width is not a marker
     split_pale_blobs: bool = False  # split such a blob by per-pixel class and keep its saturated parts
@@ -200,25 +200,22 @@ class ExtractionSettings:
 
 
 CLUMP_AREA = 1.8  # a clump of touching dots: at least this many times the frame's median blob area
-MAX_MERGE_PX = 6.0  # fragments of one marker lie within a dot of each other, and at most this far apart
 
 
 def merge_marker_fragments(sums, cls, settings: ExtractionSettings):
     """:func:`.detections.merge_fragments` at ``settings.marker_diameter_px`` when given, else at
     the frame's typical dot (:func:`.detections.typical_dot_diameter_px` of the blobs merged at
-    ``MAX_MERGE_PX``, those of at least ``min_area`` pixels), at most ``MAX_MERGE_PX``. Interlaced
+    ``MAX_DOT_PX``, those of at least ``min_area`` pixels), at most ``MAX_DOT_PX``. Interlaced
     fields break every dot into fragments a dot apart, which the first merge joins; on a 720x480
     rig with 2.2 mm dots (~4 px across) a fixed 6 px had merged neighbouring dots of one colour
-    (4.5 % of the mirror images merged or pulled 1.5-4 px off their dot). Returns the merged sums,
-    each blob's group (or None) and the radius used."""
+    (4.5 % of the mirror images merged or pulled 1.5-4 px off their dot). Returns the merged sums
+    and each blob's group (or None)."""
     if settings.marker_diameter_px is not None:
-        return (*merge_fragments(sums, cls, settings.marker_diameter_px), float(settings.marker_diameter_px))
-    merged, group = merge_fragments(sums, cls, MAX_MERGE_PX)
+        return merge_fragments(sums, cls, settings.marker_diameter_px)
+    merged, group = merge_fragments(sums, cls, MAX_DOT_PX)
     area = merged[:, 3]
     dot = typical_dot_diameter_px(area[area >= settings.min_area])
-    if 0 < dot < MAX_MERGE_PX:
-        return (*merge_fragments(sums, cls, dot), dot)
-    return merged, group, MAX_MERGE_PX
+    return merge_fragments(sums, cls, dot) if 0 < dot < MAX_DOT_PX else (merged, group)
 
 
 class MarkerExtractor:
@@ -282,7 +279,7 @@ class MarkerExtractor:
         sums = _blob_sums(lab, n, wgt, xs, ys, r, g, b, t)[1:]  # drop the background label
         cls = self.colors.classify(sums[:, 5:8])
         # merge fragments of one marker: same class, centres closer than a diameter
-        sums, group, _ = merge_marker_fragments(sums, cls, s)
+        sums, group = merge_marker_fragments(sums, cls, s)
         if group is None:
             group = np.arange(sums.shape[0])  # each component's marker
         else:

@@ -116,6 +116,15 @@ def view_boundaries(layout: ViewLayout) -> list:
     return [(float(x0), "mirror0", "direct"), (float(x1), "direct", "mirror1")]
 
 
+def _line_counts(xs, half: float):
+    """Every vertical line ``centres`` (1 px apart) over the span of the sorted ``xs``, the
+    detections within ``half`` of each (``counts``) and the views' ``typical`` count (the median
+    over the lines that hold any)."""
+    centres = np.arange(np.floor(xs[0]), np.ceil(xs[-1]) + 1.0)
+    counts = np.searchsorted(xs, centres + half) - np.searchsorted(xs, centres - half)
+    return centres, counts, float(np.median(counts[counts > 0]))
+
+
 def check_view_boundaries(x, layout: ViewLayout, frames: int, dot_px: float) -> dict:
     """Do the view boundaries of ``layout`` run between the views' dots? ``x``: the detections'
     image x pooled over ``frames`` frames; ``dot_px``: a dot's diameter in pixels.
@@ -128,17 +137,15 @@ def check_view_boundaries(x, layout: ViewLayout, frames: int, dot_px: float) -> 
     the mirrors are turned so far towards the face that the cheeks pass in front of them) or the
     views touch there; either way dots near it are read in the wrong view. Density alone cannot
     tell the two apart -- a mirror image is densest at its foreshortened edge -- so the report
-    gives the emptiest line nearby for the user to judge."""
+    gives the emptiest line nearby for the user to judge. An automatic split's ``note`` (views that
+    touch, :func:`_valley_split`) is carried along."""
     xs = np.sort(np.asarray(x, dtype=float))
     half = max(float(dot_px), 2.0)
-    out = {"boundaries": [], "crowded": False}
+    out = {"boundaries": [], "crowded": False, **({"note": layout.note} if layout.note else {})}
     if xs.size < 10 or frames < 1:
         return out
-    lo, hi = float(xs[0]), float(xs[-1])
-    centres = np.arange(np.floor(lo), np.ceil(hi) + 1.0)
-    counts = np.searchsorted(xs, centres + half) - np.searchsorted(xs, centres - half)
-    typical = float(np.median(counts[counts > 0]))
-    reach = 0.1 * (hi - lo)
+    centres, counts, typical = _line_counts(xs, half)
+    reach = 0.1 * (xs[-1] - xs[0])
     for b, left, right in view_boundaries(layout):
         near = int(np.searchsorted(xs, b + half) - np.searchsorted(xs, b - half))
         window = np.flatnonzero((centres >= b - reach) & (centres <= b + reach))
@@ -179,19 +186,25 @@ def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | 
     four dots from both, is as empty as the emptier of them (sparse markers leave empty columns
     within a view: the split would be a guess)."""
     half = max(float(half_px), 2.0)
-    centres = np.arange(np.floor(xs[0]), np.ceil(xs[-1]) + 1.0)
-    counts = np.searchsorted(xs, centres + half) - np.searchsorted(xs, centres - half)
-    typical = float(np.median(counts[counts > 0]))
-    share = np.searchsorted(xs, centres) / xs.size            # detections left of each line
+    centres, counts, typical = _line_counts(xs, half)
+    share = np.searchsorted(xs, centres) / xs.size            # detections left of each line (non-decreasing)
     f = min_view_fraction
-    best = None
-    for i in np.flatnonzero((share >= f) & (share <= 1.0 - 2.0 * f)):
-        j = np.flatnonzero((share >= share[i] + f) & (share <= 1.0 - f))
-        if j.size:
-            j = j[np.argmin(counts[j])]
-            if best is None or counts[i] + counts[j] < best[0]:
-                best = (counts[i] + counts[j], i, j)
-    if best is None or best[0] / 2.0 > VALLEY_MAX * typical:
+    # for each first line i, the emptiest second line j (the first of equals) with share[j] in
+    # [share[i] + f, 1 - f]: a suffix minimum over counts up to the last such line
+    last = int(np.searchsorted(share, 1.0 - f, side="right")) - 1
+    first_i = np.flatnonzero((share >= f) & (share <= 1.0 - 2.0 * f))
+    j_from = np.searchsorted(share, share[first_i] + f, side="left")
+    ok = j_from <= last
+    if last < 0 or not ok.any():
+        return None
+    first_i, j_from = first_i[ok], j_from[ok]
+    L = len(counts)
+    key = counts[:last + 1].astype(np.int64) * L + np.arange(last + 1)   # count, then index
+    best_j = np.minimum.accumulate(key[::-1])[::-1][j_from] % L
+    total = counts[first_i] + counts[best_j]
+    k = int(np.argmin(total))
+    best = (int(total[k]), int(first_i[k]), int(best_j[k]))
+    if best[0] / 2.0 > VALLEY_MAX * typical:
         return None
     # the lines must stand out: another line inside the views as empty as the emptier of the two
     # (sparse markers leave empty columns within a view) makes the split a guess

@@ -227,6 +227,13 @@ MERGE_MM = 1.0          # a later chain continues a marker when it lies this nea
 MERGE_SEARCH_MM = 15.0  # ... among the markers whose neutral positions lie this near
 
 
+def measured_together(measured) -> np.ndarray:
+    """``(N, N)`` bool: which labels are measured in the same frame somewhere (``measured (F, N)``)
+    -- two such labels are two dots, never a split of one (one matrix product; float for BLAS)."""
+    m = np.asarray(measured, np.float32)
+    return (m.T @ m) > 0.5
+
+
 def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
     """Offline, a marker picked up again later as a new chain (a *split*: one dot, two labels) is
     merged back. Two labels that are never measured in the same frame, whose neutral positions lie
@@ -242,9 +249,10 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
     first = np.where(measured.any(axis=0), np.argmax(measured, axis=0), F)
     nidx, _ = neighbours(result.neutral, s.neighbour_radius_mm)
     near, _ = neighbours(result.neutral, MERGE_SEARCH_MM)
+    together = measured_together(measured)
     pairs = []
     for b in np.flatnonzero(measured.sum(axis=0) >= s.min_measured_frames):
-        cands = [a for a in near[b] if a >= 0 and first[a] < first[b] and not (measured[:, a] & measured[:, b]).any()]
+        cands = [a for a in near[b] if a >= 0 and first[a] < first[b] and not together[a, b]]
         if not cands:
             continue
         gaps = np.zeros((F, N), bool)
@@ -279,6 +287,7 @@ def merge_along_2d_tracks(result: TrackResult, mirror_track) -> TrackResult:
     K = mirror_track.shape[1]
     track = np.where(measured[..., None], mirror_track[np.maximum(cand, 0)], -1)   # (F, N, K)
     near, _ = neighbours(result.neutral, MERGE_SEARCH_MM)
+    together = measured_together(measured)
     first = np.where(measured.any(axis=0), np.argmax(measured, axis=0), F)
     pairs = []
     for b in np.flatnonzero((first > 0) & (first < F)):
@@ -292,7 +301,7 @@ def merge_along_2d_tracks(result: TrackResult, mirror_track) -> TrackResult:
             ended = [a for a in np.flatnonzero(before.any(axis=0)) if a != b]
             for a in ended:
                 fa = np.flatnonzero(measured[:fb, a])[-1]           # a's last measurement before b's first
-                if track[fa, a, k] != tk or (measured[:, a] & measured[:, b]).any() or a not in near[b]:
+                if track[fa, a, k] != tk or together[a, b] or a not in near[b]:
                     continue
                 if (track[fa + 1:fb, :, k] == tk).any():           # someone measured the track in between
                     continue

@@ -93,8 +93,6 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
         else np.zeros(0)
     views = check_view_boundaries(xs, stream.layout, len(frames), stream.dot_px or 0.0) \
         if stream.layout is not None else None
-    if views is not None and stream.layout.note:
-        views["note"] = stream.layout.note
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,

@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 from ..capture.views import ClipDetections
 from ..geometry.mirror import points_from_planes, reflect_points
 from ..geometry.rigid import rotation_zyx
-from .late import merge_labels
+from .late import measured_together, merge_labels
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings
 
 MAX_GATE_PX = 2.5        # the largest distance (pixels) from the predicted image to the blob taken
@@ -422,8 +422,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     owner = np.full(len(det.frame[0]), -1)             # the label measured from each direct blob
     f, i = np.nonzero(measured)
     owner[blobs[f, i, 0]] = i
-    m32 = measured.astype(np.float32)
-    together = (m32.T @ m32) > 0.5                     # labels measured in one frame (BLAS: float)
+    together = measured_together(measured)
     R = rotation_zyx(result.head_pose[:, :3])
 
     def pixels(v, b):
@@ -554,11 +553,8 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
         votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, limit, per_frame, tried=tried)
         measured = result.assigned_blob >= 0
         first = np.argmax(measured, axis=0)
-        pairs = []
-        for a, b in sorted(set(votes)):
-            if (measured[:, a] & measured[:, b]).any():
-                continue
-            pairs.append((a, b) if first[a] <= first[b] else (b, a))
+        together = measured_together(measured)
+        pairs = [(a, b) if first[a] <= first[b] else (b, a) for a, b in sorted(set(votes)) if not together[a, b]]
         if pairs:   # labels renumbered: every start is new again
             result = merge_labels(result, list(dict.fromkeys(pairs)))
             tried = set()
