@@ -44,6 +44,21 @@ def run_stabilize_benchmark(draws: int = 20) -> dict:
                 rows[key].append(_rms(st.points[:, 3:], take.head_frame0[:, 3:]))
         out["layouts"][name] = {k: {"median": float(np.median(v)), "min": float(np.min(v)), "max": float(np.max(v)),
                                     "over_0_45": int(np.sum(np.asarray(v) > 0.45))} for k, v in rows.items()}
+    # held out: other draws (seeds 100-119) with the neck swaying faster and further than the take
+    out["sways"] = {}
+    for sway_mm, sway_hz in ((0.5, 0.05), (0.5, 0.5), (1.0, 0.3), (2.0, 0.3), (1.0, 1.0)):
+        rows = {"invariants": [], "arun": [], "window_s": []}
+        for seed in range(100, 100 + draws):
+            take = sparse_take(seed, sway_mm=sway_mm, sway_hz=sway_hz)
+            for method in ("invariants", "arun"):
+                st = stabilize(take.points, take.labels, rigid=take.labels[:3], method=method, rate=take.rate)
+                rows[method].append(_rms(st.points[:, 3:], take.head_frame0[:, 3:]))
+            rows["window_s"].append(st.sway_window_s)
+        out["sways"][f"{sway_mm:g} mm at {sway_hz:g} Hz"] = {
+            **{k: {"median": float(np.median(rows[k])), "max": float(np.max(rows[k])),
+                   "over_0_45": int(np.sum(np.asarray(rows[k]) > 0.45))} for k in ("invariants", "arun")},
+            "window_s": {f"{w:.1f}": int(np.sum(np.round(rows["window_s"], 1) == round(w, 1)))
+                         for w in sorted(set(np.round(rows["window_s"], 1)))}}
     # speed: a 10-minute take at 60 frames/s (36,000 frames, 23 markers)
     take = sparse_take(0, frames=36000)
     with tempfile.TemporaryDirectory() as tmp:
@@ -70,6 +85,14 @@ def stabilize_summary(res: dict) -> list:
         lines.append(f"| {name} | {mm('invariants')} ({r['invariants']['over_0_45']}) | {mm('arun')} "
                      f"({r['arun']['over_0_45']}) | {mm('aligned')} | {mm('pivot_mm')} | {mm('agree')} | "
                      f"{r['no_pivot']['median']:.2f} mm | {r['raw']['median']:.2f} mm |")
+    if "sways" in res:
+        lines += ["", "Held out (headband, other draws, the neck swaying faster and further):", "",
+                  "| sway | invariants (median / worst, > 0.45) | Arun | sway window chosen (s: draws) |",
+                  "| --- | --- | --- | --- |"]
+        for name, r in res["sways"].items():
+            lines.append(f"| {name} | {r['invariants']['median']:.2f} / {r['invariants']['max']:.2f} mm "
+                         f"({r['invariants']['over_0_45']}) | {r['arun']['median']:.2f} / {r['arun']['max']:.2f} mm "
+                         f"({r['arun']['over_0_45']}) | " + ", ".join(f"{w}: {n}" for w, n in r["window_s"].items()) + " |")
     s = res["speed"]
     lines += ["", f"A {s['frames']}-frame take of {s['markers']} markers: written in {s['write_s']:.2f} s, read in "
                   f"{s['read_s']:.2f} s, stabilised in {s['stabilize_s']:.2f} s."]

@@ -27,10 +27,11 @@ class SparseTake:
 
 def sparse_take(seed: int = 0, frames: int = 600, rate: float = 60.0, yaw_deg: float = 20.0,
                 pitch_deg: float = 10.0, roll_deg: float = 5.0, sway_mm: float = 0.5, noise_mm: float = 0.15,
-                expression_mm: float = 3.0, band=HEADBAND) -> SparseTake:
+                expression_mm: float = 3.0, band=HEADBAND, sway_hz: float = 0.05) -> SparseTake:
     """``frames`` of 3 headband + 20 face markers: the head turns (``yaw_deg`` etc., slow
     sines) about the pivot, which sways by at most ``sway_mm``; the face markers move with
-    an expression of ``expression_mm``; Gaussian noise ``noise_mm`` per coordinate; the
+    an expression of ``expression_mm``; the sway's slowest component has ``sway_hz`` (the others
+    1.4x and 0.6x it); Gaussian noise ``noise_mm`` per coordinate; the
     volume's axes are turned and offset as a mocap system's would be."""
     rng = np.random.default_rng(seed)
     th = rng.uniform(-0.9, 0.9, 20)
@@ -45,8 +46,9 @@ def sparse_take(seed: int = 0, frames: int = 600, rate: float = 60.0, yaw_deg: f
     expression = np.zeros((frames, 23, 3))
     expression[:, 3:] = rng.normal(0, 1, (1, 20, 3)) * expression_mm * np.sin(2 * np.pi * 0.5 * tt)[:, None, None]
     head = neutral[None] + expression
-    sway = sway_mm / np.sqrt(3) * np.stack([np.sin(2 * np.pi * 0.05 * tt), np.cos(2 * np.pi * 0.07 * tt),
-                                            np.sin(2 * np.pi * 0.03 * tt + 2.0)], 1)
+    hz = sway_hz * np.array([1.0, 1.4, 0.6])
+    sway = sway_mm / np.sqrt(3) * np.stack([np.sin(2 * np.pi * hz[0] * tt), np.cos(2 * np.pi * hz[1] * tt),
+                                            np.sin(2 * np.pi * hz[2] * tt + 2.0)], 1)
     volume_R = rotation_zyx(np.radians([5.0, 30.0, 180.0]))
     volume_t = np.array([200.0, 1500.0, 900.0])
     local = np.einsum("fij,fmj->fmi", R, head - PIVOT_HEAD) + PIVOT_HEAD + sway[:, None]

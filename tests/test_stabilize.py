@@ -48,9 +48,10 @@ def test_a_23_marker_take_is_stabilised_about_its_pivot():
     """The issue's take (headband triangle, 20 face markers, +-20 deg about a pivot at the top
     of the neck, <= 0.5 mm sway, 0.15 mm noise, 60 frames/s) over ten noise draws: the pivot
     within 5 mm in every one; the face markers in the first frame's head frame within
-    0.45 mm RMS in the median take (a single frame's pose fixes that head frame, so its noise
-    tilts a whole take: the worst draws reach ~0.55 mm, README); invariants and Arun within
-    the noise of each other; the pivot and the pose smoothing each lowering the error."""
+    0.45 mm RMS in every draw, by both methods (the first frame's pose fixes that head frame for
+    the whole take; with the pivot's sway smoothed over 0.5 s only, 3 of 20 draws were 0.50-0.52 mm);
+    invariants and Arun within the noise of each other; the pivot and the pose smoothing each
+    lowering the error; the slow sway smoothed over the longest window (3 s)."""
     errors = {"invariants": [], "arun": [], "no pivot": [], "raw": []}
     for seed in range(10):
         take = sparse_take(seed)
@@ -61,6 +62,7 @@ def test_a_23_marker_take_is_stabilised_about_its_pivot():
             assert np.linalg.norm(st.pivot_mm - take.pivot) < 5.0
             # the true sway is <= 0.5 mm; a pivot e off adds up to |R - I| e (~0.4 e at 20 deg), and the noise
             assert np.nanmax(np.linalg.norm(st.sway_mm, axis=1)) < 0.5 + 0.4 * 5.0
+            assert st.sway_window_s == pytest.approx(3.0, abs=0.02)
             errors[method].append(_rms(st.points[:, 3:], take.head_frame0[:, 3:]))
             out[method] = st.points
         assert _rms(out["invariants"], out["arun"]) < 0.15          # the noise is 0.15 mm per coordinate
@@ -69,9 +71,18 @@ def test_a_23_marker_take_is_stabilised_about_its_pivot():
         errors["no pivot"].append(_rms(no_pivot.points[:, 3:], take.head_frame0[:, 3:]))
         errors["raw"].append(_rms(raw.points[:, 3:], take.head_frame0[:, 3:]))
     median = {k: float(np.median(v)) for k, v in errors.items()}
-    assert median["invariants"] < 0.45 and median["arun"] < 0.45
-    assert max(errors["invariants"] + errors["arun"]) < 0.7
+    assert max(errors["invariants"] + errors["arun"]) < 0.45
     assert median["arun"] < median["no pivot"] < median["raw"]
+
+
+def test_a_fast_large_sway_is_followed_with_a_short_window():
+    """The sway window is chosen by the data: a neck swaying 1 mm at 1 Hz (twice the issue's
+    sway, twenty times as fast) is followed over 0.5 s, and the take stays within 0.75 mm."""
+    take = sparse_take(3, sway_mm=1.0, sway_hz=1.0)
+    st = stabilize(take.points, take.labels, rigid=take.labels[:3], rate=take.rate)
+    assert st.sway_window_s == pytest.approx(0.5, abs=0.02)
+    assert _rms(st.points[:, 3:], take.head_frame0[:, 3:]) < 0.75
+    assert st.report()["sway_window_s"] == st.sway_window_s
 
 
 def test_automatic_rigid_markers_are_the_headband():
