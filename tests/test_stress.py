@@ -93,10 +93,11 @@ def test_dense_rig_at_the_papers_resolution_self_calibrated(tmp_path, capsys):
 
 def test_later_chains_of_a_marker_merge_back_into_it(tmp_path, capsys):
     """#18: on the head-motion stress clip (300 frames, +-15 deg yaw, fast expressions) four markers were
-    each picked up again later as a second label; a later chain that lies within 1 mm of the earlier
-    marker's conjecture (its learned neighbour relations) at every frame it is measured merges back
-    into it (two of the four), and so does one whose dot the earlier label's followed dots reach (the
-    other two): no split left, no identity switch, the take as accurate."""
+    each picked up again later as a second label. Two are no longer lost: their dots are followed on
+    their 2D tracks through motion faster than the gate (core.track.tracker, ``follow_2d_max_mm``). A later
+    chain that lies within 1 mm of the earlier marker's conjecture (its learned neighbour relations)
+    at every frame it is measured merges back into it, and so does one whose dot the earlier label's
+    followed dots reach: no split left, no identity switch, the take as accurate."""
     from mirrorcap.core.geometry.camera import Camera
     from mirrorcap.core.take.c3d import read_c3d
     from mirrorcap.synthetic.evaluate import score_take
@@ -113,9 +114,9 @@ def test_later_chains_of_a_marker_merge_back_into_it(tmp_path, capsys):
                    conjectured=take["conjectured"], seen=seen)
     print(f"motion clip: {report['per_frame']['merged_labels'][0]} labels merged, {s['split_markers']} split left, "
           f"{s['identity_switches']} switches, {100 * s['seen_reported_fraction']:.2f} % reported")
-    # two merge by their conjectures (core.track.late.merge_split_labels), the other two when a followed dot
-    # reaches the later label's measurement (core.track.singleview.follow_dots_through_gaps): none left
-    assert report["per_frame"]["merged_labels"][0] >= 4 and s["split_markers"] == 0
+    # merged by their conjectures (core.track.late.merge_split_labels) or when a followed dot reaches the
+    # later label's measurement (core.track.singleview.follow_dots_through_gaps): none left
+    assert report["per_frame"]["merged_labels"][0] >= 2 and s["split_markers"] == 0
     # 98.4 % reported with the dots followed through gaps (core.track.singleview; 94.9 % before)
     assert s["identity_switches"] == 0 and s["rms_mm"] < 0.2 and s["seen_reported_fraction"] > 0.98
 
@@ -358,3 +359,27 @@ def test_a_sparse_rig_the_product_cannot_measure_is_refused_not_guessed(tmp_path
                           capsys)
     assert code == 2 and "cannot split the direct and mirror views" in err
     assert not any(tmp_path.iterdir())  # nothing written, nothing half-written
+
+
+@pytest.mark.parametrize("name, reported, split", [("close", 0.96, 0), ("jaw", 0.955, 1)])
+def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path, capsys, name, reported, split):
+    """#18, two held-out clips: close (a face 480 mm from a wide lens, mirrors at 55 deg) and jaw
+    (expressions 2.5 times as fast, 30 frames/s), where chin and lip dots move 3.5-4.6 mm in a frame,
+    more than the widest gate (3 mm). Such a marker was lost in the first fast frame and, its
+    conjecture off, not taken back for tens of frames (close: one never tracked at all, 93.7 % of the
+    seen marker-frames reported; jaw: 95.2 %, one identity switch, a point 12.8 mm off). Its
+    candidate on the 2D tracks of its last measurement (the direct view and a mirror) is now taken
+    beyond the gate, when the step lies mostly across the line of sight (which the direct view
+    vouches for) and along it within the marker's gate (a mirror's track can slip onto a like dot
+    on the same epipolar line): close 96.8 %, jaw 95.8 %, no switch, no point off by more than 3.4 mm.
+    One jaw marker is still split over two labels (with the rule and without: a dot measured in 15
+    frames up to frame 62, and in 20 from frame 55 under a second label): open in #18."""
+    clip = ROOT / "sample_scenes" / "stress" / name
+    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", clip / "rig.json",
+                           "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
+    assert code == 0, err
+    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
+    assert s["identity_switches"] == 0 and s["split_markers"] <= split and s["markers_matched"] == s["markers_tracked"]
+    assert s["seen_reported_fraction"] > reported
+    assert s["rms_mm"] < 0.25 and s["max_mm"] < 3.5
+    assert abs(ratio_error) < 0.002

@@ -532,8 +532,24 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             a = np.where(valid, j + sl.start, -1)
             confirmed = np.zeros(N, bool)
             if cand_dtrack is not None:
-                cont = _continuing(cand_dtrack[sl], cand_mtrack[sl], last_dtrack, last_mtrack) + sl.start
+                cont = _continuing(cand_dtrack[sl], cand_mtrack[sl], last_dtrack, last_mtrack)
+                cont = np.where(cont >= 0, cont + sl.start, -1)
                 confirmed = valid & (a == cont)
+                # no candidate in the gate, but one on the marker's own 2D tracks: the same dot, moved
+                # faster than the gate allows (a jaw opening in a frame or two). The direct view's track
+                # vouches for the motion across the line of sight; along it, where only the mirror's
+                # pairing speaks (a mirror's 2D track can slip onto a like dot on the same epipolar
+                # line), the marker's own gate holds, and the step must lie mostly across it
+                beyond = np.flatnonzero(~valid & (cont >= 0) & (entry <= t))
+                if beyond.size:
+                    step = cands.points[cont[beyond]] - query[beyond, :3]
+                    sight = query[beyond, :3] / np.linalg.norm(query[beyond, :3], axis=1, keepdims=True)
+                    along = np.abs(np.einsum("ij,ij->i", step, sight))
+                    off = np.linalg.norm(step, axis=1)
+                    ok = (off <= s.follow_2d_max_mm) & (along <= np.minimum(gate_i[beyond], 0.5 * off))
+                    take = beyond[ok]
+                    a[take], near[take] = cont[take], off[ok]
+                    valid[take] = True    # and, unlike a confirmed candidate in the gate, judged by eq. 5.6
             back = np.flatnonzero(valid & ~confirmed & (last_frame < t - 1)) if t > 0 else np.zeros(0, int)
             if back.size:  # coming back after a gap: only to a candidate that lasts
                 lasts = np.zeros(back.size, bool)
