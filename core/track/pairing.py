@@ -238,3 +238,38 @@ def partner_blobs(det: ClipDetections, direct_ids, partner, mirror_ids):
         hit = (mate >= 0) & (key[order][at] == want)
         blob[k, hit] = order[at[hit]]
     return track, blob
+
+
+def candidate_tracks(det: ClipDetections, cands):
+    """The 2D track (:func:`track_2d`, per view over the whole clip) of every clip
+    candidate's direct blob ``(C,)`` and mirror blobs ``(C, K)`` (-1: no blob in that mirror)."""
+    if "_tracks" in cands.__dict__:
+        return cands.__dict__["_tracks"]
+    K = cands.mirror_blob.shape[1]
+    ids = [np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
+           if len(det.xy[v]) else np.zeros(0, int) for v in range(K + 1)]
+    dtrack = ids[0][cands.direct] if len(cands.direct) else np.zeros(0, int)
+    mtrack = np.full(cands.mirror_blob.shape, -1)
+    for k in range(K):
+        has = cands.mirror_blob[:, k] >= 0
+        mtrack[has, k] = ids[k + 1][cands.mirror_blob[has, k]]
+    cands.__dict__["_tracks"] = (dtrack, mtrack)      # the final pass and the merge read them
+    return dtrack, mtrack
+
+
+def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack) -> np.ndarray:
+    """Per marker, the frame's candidate (index into the frame's candidates; -1: none) whose
+    direct blob continues the 2D track of the marker's last measurement *and* whose blob in some
+    mirror continues that mirror's track: the same physical dot seen the same way, so the same
+    marker whatever its 3D motion. Several such candidates: the one sharing the most tracks."""
+    if dtrack.size == 0 or not (last_dtrack >= 0).any():
+        return np.full(len(last_dtrack), -1)
+    i, c = np.nonzero((dtrack[None, :] == last_dtrack[:, None]) & (last_dtrack[:, None] >= 0))
+    shared = ((mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)).sum(axis=1)
+    ok = shared > 0
+    i, c, shared = i[ok], c[ok], shared[ok]
+    out = np.full(len(last_dtrack), -1)
+    order = np.lexsort((-shared, i))                  # per marker, most shared tracks first
+    first = np.r_[True, i[order][1:] != i[order][:-1]]
+    out[i[order][first]] = c[order][first]
+    return out

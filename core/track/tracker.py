@@ -17,7 +17,7 @@ Steps, per the procedure:
 6. markers predicted by their own Kalman filters (eq. 4.1-4.2) in the head frame,
    assigned one-to-one to candidates within a gate; false tracking by the neighbour
    test (eq. 5.6-5.7), except, in the final pass, for a candidate on the 2D tracks of the
-   marker's last measurement in the direct view and a mirror (:func:`_continuing`: the same
+   marker's last measurement in the direct view and a mirror (:func:`.pairing.continuing_candidate`: the same
    dot, though it moves unlike its neighbours -- a lip against the chin); conflicts (one 2D
    blob claimed twice) keep the marker closest to its prediction;
 7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
@@ -55,7 +55,7 @@ from .motion import (
     neighbours,
     previous_and_next,
 )
-from .pairing import paired_tracks, partner_blobs
+from .pairing import candidate_tracks, continuing_candidate, paired_tracks, partner_blobs
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
 from .seeds import seeded_tracks
 
@@ -261,7 +261,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
     result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     result = merge_split_labels(result, s)
-    result = merge_along_2d_tracks(result, _candidate_tracks(det, cands)[1] if s.follow_2d_tracks else None)
+    result = merge_along_2d_tracks(result, candidate_tracks(det, cands)[1] if s.follow_2d_tracks else None)
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
@@ -435,43 +435,6 @@ def _resolve_conflicts(a, near, keys):
     return lost
 
 
-def _candidate_tracks(det: ClipDetections, cands: ClipCandidates):
-    """The 2D track (:func:`.pairing.track_2d`, per view over the whole clip) of every clip
-    candidate's direct blob ``(C,)`` and mirror blobs ``(C, K)`` (-1: no blob in that mirror)."""
-    from .pairing import track_2d
-
-    if "_tracks" in cands.__dict__:
-        return cands.__dict__["_tracks"]
-    K = cands.mirror_blob.shape[1]
-    ids = [np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
-           if len(det.xy[v]) else np.zeros(0, int) for v in range(K + 1)]
-    dtrack = ids[0][cands.direct] if len(cands.direct) else np.zeros(0, int)
-    mtrack = np.full(cands.mirror_blob.shape, -1)
-    for k in range(K):
-        has = cands.mirror_blob[:, k] >= 0
-        mtrack[has, k] = ids[k + 1][cands.mirror_blob[has, k]]
-    cands.__dict__["_tracks"] = (dtrack, mtrack)      # the final pass and the merge read them
-    return dtrack, mtrack
-
-
-def _continuing(dtrack, mtrack, last_dtrack, last_mtrack) -> np.ndarray:
-    """Per marker, the frame's candidate (index into the frame's candidates; -1: none) whose
-    direct blob continues the 2D track of the marker's last measurement *and* whose blob in some
-    mirror continues that mirror's track: the same physical dot seen the same way, so the same
-    marker whatever its 3D motion. Several such candidates: the one sharing the most tracks."""
-    if dtrack.size == 0 or not (last_dtrack >= 0).any():
-        return np.full(len(last_dtrack), -1)
-    i, c = np.nonzero((dtrack[None, :] == last_dtrack[:, None]) & (last_dtrack[:, None] >= 0))
-    shared = ((mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)).sum(axis=1)
-    ok = shared > 0
-    i, c, shared = i[ok], c[ok], shared[ok]
-    out = np.full(len(last_dtrack), -1)
-    order = np.lexsort((-shared, i))                  # per marker, most shared tracks first
-    first = np.r_[True, i[order][1:] != i[order][:-1]]
-    out[i[order][first]] = c[order][first]
-    return out
-
-
 def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, rigid, progress) -> TrackResult:
     """One pass of the procedure over the clip (module docstring, steps 4-8)."""
     from scipy.spatial import cKDTree
@@ -505,7 +468,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
     view_bit = (2 ** np.arange(1, K + 1))[None, :]
     trees = {}
     # 2D continuity: each candidate's direct and mirror blobs' 2D tracks (.pairing.track_2d)
-    cand_dtrack, cand_mtrack = _candidate_tracks(det, cands) if s.follow_2d_tracks else (None, None)
+    cand_dtrack, cand_mtrack = candidate_tracks(det, cands) if s.follow_2d_tracks else (None, None)
     last_dtrack = np.full(N, -1)
     last_mtrack = np.full((N, K), -1)
 
@@ -532,7 +495,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             a = np.where(valid, j + sl.start, -1)
             confirmed = np.zeros(N, bool)
             if cand_dtrack is not None:
-                cont = _continuing(cand_dtrack[sl], cand_mtrack[sl], last_dtrack, last_mtrack)
+                cont = continuing_candidate(cand_dtrack[sl], cand_mtrack[sl], last_dtrack, last_mtrack)
                 cont = np.where(cont >= 0, cont + sl.start, -1)
                 confirmed = valid & (a == cont)
                 # no candidate in the gate, but one on the marker's own 2D tracks: the same dot, moved
