@@ -370,7 +370,7 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     seen marker-frames reported; jaw: 95.2 %, one identity switch, a point 12.8 mm off). Its
     candidate on the 2D tracks of its last measurement (the direct view and a mirror) is now taken
     beyond the gate, when the step lies mostly across the line of sight (which the direct view
-    vouches for) and along it within the marker's gate (a mirror's track can slip onto a like dot
+    vouches for) and along it within the widest gate (a mirror's track can slip onto a like dot
     on the same epipolar line): close 96.8 %, jaw 95.8 %, no switch, no point off by more than 3.4 mm.
     One jaw marker is still split over two labels (with the rule and without: a dot measured in 15
     frames up to frame 62, and in 20 from frame 55 under a second label): open in #18."""

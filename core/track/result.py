@@ -22,7 +22,7 @@ class TrackSettings:
     follow_2d_tracks: bool = True  # final pass: a marker's candidate on the 2D tracks of its last measurement
     # (direct view and a mirror) is not judged by the neighbour test of eq. 5.6 when in the gate; past the
     follow_2d_max_mm: float = 12.0  # gate (a dot faster than it) it is taken up to this far off, its step
-    # along the line of sight within the marker's gate and under half the step, and judged by eq. 5.6
+    # along the line of sight within the widest gate (gate_mm) and under half the step, and judged by eq. 5.6
     measure_sigma_mm: float = 0.1  # measurement noise for the marker filters
     conjecture_sigma_mm: float = 1.0  # conjectured positions are trusted less
     accel_sigma_mm: float = 1.0  # velocity change per frame, marker filters

@@ -502,14 +502,14 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 # faster than the gate allows (a jaw opening in a frame or two). The direct view's track
                 # vouches for the motion across the line of sight; along it, where only the mirror's
                 # pairing speaks (a mirror's 2D track can slip onto a like dot on the same epipolar
-                # line), the marker's own gate holds, and the step must lie mostly across it
+                # line), the widest gate holds, and the step must lie mostly across it
                 beyond = np.flatnonzero(~valid & (cont >= 0) & (entry <= t))
                 if beyond.size:
                     step = cands.points[cont[beyond]] - query[beyond, :3]
                     sight = query[beyond, :3] / np.linalg.norm(query[beyond, :3], axis=1, keepdims=True)
                     along = np.abs(np.einsum("ij,ij->i", step, sight))
                     off = np.linalg.norm(step, axis=1)
-                    ok = (off <= s.follow_2d_max_mm) & (along <= np.minimum(gate_i[beyond], 0.5 * off))
+                    ok = (off <= s.follow_2d_max_mm) & (along <= np.minimum(s.gate_mm, 0.5 * off))
                     take = beyond[ok]
                     a[take], near[take] = cont[take], off[ok]
                     valid[take] = True    # and, unlike a confirmed candidate in the gate, judged by eq. 5.6
