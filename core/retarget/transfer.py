@@ -42,6 +42,8 @@ from .arkit import arkit_basis, solve_weights
 #: the landmarks motion transfer needs on both heads (``lm_lower_lip`` is optional)
 TRANSFER_LANDMARKS = ("nose_tip", "eye_inner_l", "eye_outer_l", "eye_inner_r", "eye_outer_r", "mouth_corner_l",
                       "mouth_corner_r", "chin", "upper_lip", "tragus_l", "tragus_r")
+#: the actor head's separate pieces: the target's main mesh never takes their motion
+DETACHED_PARTS = ("teeth_upper", "teeth_lower", "eyeball_l", "eyeball_r")
 FEATURES = ("eye_distance", "eye_to_nose", "mouth_width", "nose_to_chin", "cheek_to_lip")
 FACING_PENALTY_MM = 2.0  # correspondence cost of a triangle facing the opposite way (x (1 - cos))
 REACH_MM = 12.0          # a target vertex further than this from the fitted actor fades out of the motion
@@ -196,6 +198,37 @@ def motion_classes(head: HeadModel) -> np.ndarray:
     return out
 
 
+SKIN, PARTS, ANY = 0, 1, 2   # which of the actor's triangles a target vertex may take (correspond)
+
+
+def _candidates_by_kind(Vf, T, P, verts, tri_ok, kind, skin_tri, candidates: int, sample_mm: float):
+    """:func:`_candidate_triangles` of the target vertices ``verts`` among the triangles ``tri_ok``, each
+    vertex further limited by its ``kind`` (per target vertex): ``SKIN`` the actor's skin triangles
+    (``skin_tri``), ``PARTS`` the others, ``ANY`` all. Returns ``(target vertex, triangle)`` pairs, sorted
+    by target vertex."""
+    rows, tris = [np.zeros(0, int)], [np.zeros(0, int)]
+    for k, allowed in ((SKIN, tri_ok & skin_tri), (PARTS, tri_ok & ~skin_tri), (ANY, tri_ok)):
+        vs, ts = verts[kind[verts] == k], np.flatnonzero(allowed)
+        if vs.size and ts.size:
+            r, t = _candidate_triangles(Vf, T[ts], P[vs], candidates, sample_mm=sample_mm)
+            rows.append(vs[r])
+            tris.append(ts[t])
+    rows, tris = np.concatenate(rows), np.concatenate(tris)
+    order = np.argsort(rows, kind="stable")
+    return rows[order], tris[order]
+
+
+def _mesh_pieces(head: HeadModel) -> np.ndarray:
+    """Per vertex, the connected piece of the head's mesh it belongs to."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    e = head.edges()
+    n = len(head.vertices)
+    return connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
+                                directed=False)[1]
+
+
 def _cheapest(rows, cost, n: int) -> np.ndarray:
     """Per point ``0..n-1``, the index (into ``rows``/``cost``) of its cheapest candidate."""
     order = np.lexsort((cost, rows))
@@ -249,15 +282,36 @@ def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: f
                    rounds=rounds, exclude_groups=exclude_groups)
     Vf = fit.vertices
     T = actor.triangles()
-    rows, tris = _candidate_triangles(Vf, T, target.vertices, candidates, sample_mm=1.5 * fit.scale)
     P = target.vertices
-    bary, dist = _closest_on_triangles(P[rows], *(Vf[T[tris, j]] for j in range(3)))
+    # Skin and separate parts do not mix. The target's main mesh (its skin, the inside of its lips) never
+    # takes the motion of the actor's separate parts (teeth, eyeballs): behind a thin lip the actor's lower
+    # teeth can be nearer than its inner lip, and a character's inner lip then stayed with the teeth while
+    # its lip moved (a crumple below the lip). Each other piece of the target's mesh (its teeth, its eyes)
+    # takes either parts or skin, as most of its vertices land, so a tooth near the lip moves with its tooth.
+    parts = np.zeros(len(Vf), bool)
+    for g in DETACHED_PARTS:
+        if g in actor.groups:
+            parts[actor.members(g)] = True
+    skin_tri = ~parts[T].all(axis=1)
+    piece = _mesh_pieces(target)
+    main = piece == np.argmax(np.bincount(piece))
+    kind = np.where(main, SKIN, ANY)
     # where two surfaces touch (the closed lips, a lid on the eyeball) the nearest point can lie on the
     # wrong one: a triangle facing away from the target vertex's normal costs extra
     tn = np.cross(Vf[T[:, 1]] - Vf[T[:, 0]], Vf[T[:, 2]] - Vf[T[:, 0]])
     tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
-    cost = dist + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[tris], target.vertex_normals()[rows]))
-    pick = _cheapest(rows, cost, len(P))
+    normals = target.vertex_normals()
+    for round_ in range(2):
+        rows, tris = _candidates_by_kind(Vf, T, P, np.arange(len(P)), np.ones(len(T), bool), kind, skin_tri,
+                                         candidates, 1.5 * fit.scale)
+        bary, dist = _closest_on_triangles(P[rows], *(Vf[T[tris, j]] for j in range(3)))
+        cost = dist + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[tris], normals[rows]))
+        pick = _cheapest(rows, cost, len(P))
+        if round_ or main.all():
+            break
+        on_parts = ~skin_tri[tris[pick]]
+        share = np.bincount(piece, on_parts) / np.bincount(piece)
+        kind = np.where(main, SKIN, np.where(share[piece] > 0.5, PARTS, SKIN))
     # the lips' slit and the lids' slit: the motion jumps across them, and a target vertex within a few
     # mm of one can land on the wrong side. Each side is a connected piece of the target's own mesh, so
     # the side is voted over its neighbours and the vertices that landed on the other side move back
@@ -265,19 +319,20 @@ def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: f
     tri_class = np.where(tri_class[:, 0] == tri_class[:, 1], tri_class[:, 0], tri_class[:, 2])   # majority
     side = _vote_on_mesh(target, tri_class[tris[pick]], SIDE_VOTE_RINGS)
     tri, w, best = tris[pick], bary[pick], dist[pick]
-    normals = target.vertex_normals()
     for c in np.unique(side):
         move = np.flatnonzero((side == c) & (tri_class[tri] != c))
-        own = np.flatnonzero(tri_class == c)
-        if move.size == 0 or own.size == 0:
+        if move.size == 0 or not (tri_class == c).any():
             continue
         # their nearest triangles on their own side (the first candidates were all across the slit)
-        r2, t2 = _candidate_triangles(Vf, T[own], P[move], candidates, sample_mm=1.5 * fit.scale)
-        t2 = own[t2]
+        r2, t2 = _candidates_by_kind(Vf, T, P, move, tri_class == c, kind, skin_tri, candidates, 1.5 * fit.scale)
+        r2 = np.searchsorted(move, r2)
+        if r2.size == 0:
+            continue
         b2, d2 = _closest_on_triangles(P[move][r2], *(Vf[T[t2, j]] for j in range(3)))
         c2 = d2 + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[t2], normals[move][r2]))
         p2 = _cheapest(r2, c2, move.size)
-        tri[move], w[move], best[move] = t2[p2], b2[p2], d2[p2]
+        has = p2 >= 0
+        tri[move[has]], w[move[has]], best[move[has]] = t2[p2[has]], b2[p2[has]], d2[p2[has]]
     r = np.arange(len(P))
     fade = np.clip(2.0 - best / (reach_mm * fit.scale), 0.0, 1.0)
     transport = sp.csr_matrix(((w * fade[r, None]).ravel(), (np.repeat(r, 3), T[tri].ravel())),
