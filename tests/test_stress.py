@@ -93,7 +93,7 @@ def test_dense_rig_at_the_papers_resolution_self_calibrated(tmp_path, capsys):
 
 def test_later_chains_of_a_marker_merge_back_into_it(tmp_path, capsys):
     """#18: on the head-motion stress clip (300 frames, +-15 deg yaw, fast expressions) four markers were
-    each picked up again later as a second label. Two are no longer lost: their dots are followed on
+    each picked up again later as a second label. Three are no longer lost: their dots are followed on
     their 2D tracks through motion faster than the gate (core.track.tracker, ``follow_2d_max_mm``). A later
     chain that lies within 1 mm of the earlier marker's conjecture (its learned neighbour relations)
     at every frame it is measured merges back into it, and so does one whose dot the earlier label's
@@ -116,9 +116,10 @@ def test_later_chains_of_a_marker_merge_back_into_it(tmp_path, capsys):
           f"{s['identity_switches']} switches, {100 * s['seen_reported_fraction']:.2f} % reported")
     # merged by their conjectures (core.track.late.merge_split_labels) or when a followed dot reaches the
     # later label's measurement (core.track.singleview.follow_dots_through_gaps): none left
-    assert report["per_frame"]["merged_labels"][0] >= 2 and s["split_markers"] == 0
-    # 98.4 % reported with the dots followed through gaps (core.track.singleview; 94.9 % before)
-    assert s["identity_switches"] == 0 and s["rms_mm"] < 0.2 and s["seen_reported_fraction"] > 0.98
+    assert report["per_frame"]["merged_labels"][0] >= 1 and s["split_markers"] == 0
+    # 98.9 % reported with the dots followed through gaps (core.track.singleview; 94.9 % before) and past
+    # the gate on their 2D tracks (98.5 % before)
+    assert s["identity_switches"] == 0 and s["rms_mm"] < 0.2 and s["seen_reported_fraction"] > 0.985
 
 
 def test_the_clips_visibility_truth_matches_what_the_detector_finds(tmp_path, capsys):
