@@ -58,7 +58,7 @@ contact-sheet: $(STAMP)
 # markers of 2.5 mm, mirrors at 35 deg: no marker in both mirrors) and turn, held out too (1600x900, +-18 deg yaw,
 # +-12 deg pitch, expressions twice as fast) and sparse, held out and refused (80 dots of 4 mm, face 550 mm away,
 # mirrors at 38 deg); close and jaw, held out (a face 480 mm from a wide lens with mirrors at 55 deg; expressions
-# 2.5 times as fast at 30 frames/s). About 55 minutes on 2 cores.
+# 2.5 times as fast at 30 frames/s); webcam, held out (640x360, 120 dots of 3.5 mm). About 55 minutes on 2 cores.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -78,6 +78,9 @@ stress-clips: $(STAMP)
 		--markers 170 --marker-mm 3 --head-deg 10 12 10 --tempo 1.5 --frames 90 --samples 4 --seed 61 --no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/jaw --focal 1200 --distance 560 --mirror-deg 50 \
 		--markers 200 --marker-mm 2.5 --head-deg 8 10 6 --tempo 2.5 --frames 90 --samples 4 --seed 71 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/webcam --size 640 360 --focal 600 --distance 600 \
+		--mirror-deg 45 --markers 120 --marker-mm 3.5 --head-deg 8 10 4 --tempo 1.2 --frames 90 --samples 4 --seed 81 \
+		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
 # (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps; and hd, held out (1920x1080,

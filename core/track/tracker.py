@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import time
+import warnings
 
 import numpy as np
 
@@ -134,7 +135,8 @@ def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partn
             p_k = np.full_like(mates, -1)
             p_k[k, tracks] = mates[k, tracks]
             one.append(_track_positions(det, normals, ds, dids, n_dt, p_k, mids_all, tracks)[0])
-        with np.errstate(invalid="ignore"):
+        with warnings.catch_warnings():   # a track never reconstructed through both mirrors: NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
             return np.nanmedian(np.linalg.norm(one[0] - one[1], axis=2), axis=0)
 
     typical = float(np.nanmedian(spread(both, partner)))
