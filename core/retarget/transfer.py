@@ -218,15 +218,29 @@ def _candidates_by_kind(Vf, T, P, verts, tri_ok, kind, skin_tri, candidates: int
     return rows[order], tris[order]
 
 
-def _mesh_pieces(head: HeadModel) -> np.ndarray:
-    """Per vertex, the connected piece of the head's mesh it belongs to."""
+def _facing_cost(Vf, T, tn, P, normals, rows, tris):
+    """For pairs ``(point rows, triangle tris)``: the closest point's barycentric weights, its distance,
+    and the cost -- the distance plus :data:`FACING_PENALTY_MM` per unit of ``1 - cos`` between the
+    triangle's normal ``tn`` and the point's ``normals``."""
+    bary, dist = _closest_on_triangles(P[rows], *(Vf[T[tris, j]] for j in range(3)))
+    return bary, dist, dist + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[tris], normals[rows]))
+
+
+def _vertex_adjacency(head: HeadModel):
+    """The head's vertex adjacency (symmetric, CSR) from its mesh edges."""
     import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
 
     e = head.edges()
     n = len(head.vertices)
-    return connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
-                                directed=False)[1]
+    return sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                         shape=(n, n)).tocsr()
+
+
+def _mesh_pieces(head: HeadModel) -> np.ndarray:
+    """Per vertex, the connected piece of the head's mesh it belongs to."""
+    from scipy.sparse.csgraph import connected_components
+
+    return connected_components(_vertex_adjacency(head), directed=False)[1]
 
 
 def _cheapest(rows, cost, n: int) -> np.ndarray:
@@ -241,11 +255,8 @@ def _cheapest(rows, cost, n: int) -> np.ndarray:
 def _vote_on_mesh(head: HeadModel, labels, rings: int) -> np.ndarray:
     """``labels (V,)`` after ``rings`` rounds of each vertex taking the most common label of itself and
     its mesh neighbours (a tie keeps its own)."""
-    import scipy.sparse as sp
-
-    e = head.edges()
-    n = len(head.vertices)
-    A = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    A = _vertex_adjacency(head)
+    n = A.shape[0]
     lab = np.asarray(labels, np.int64)
     k = int(lab.max(initial=0)) + 1
     for _ in range(rings):
@@ -301,17 +312,19 @@ def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: f
     tn = np.cross(Vf[T[:, 1]] - Vf[T[:, 0]], Vf[T[:, 2]] - Vf[T[:, 0]])
     tn /= np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-12)
     normals = target.vertex_normals()
-    for round_ in range(2):
-        rows, tris = _candidates_by_kind(Vf, T, P, np.arange(len(P)), np.ones(len(T), bool), kind, skin_tri,
-                                         candidates, 1.5 * fit.scale)
-        bary, dist = _closest_on_triangles(P[rows], *(Vf[T[tris, j]] for j in range(3)))
-        cost = dist + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[tris], normals[rows]))
-        pick = _cheapest(rows, cost, len(P))
-        if round_ or main.all():
-            break
-        on_parts = ~skin_tri[tris[pick]]
-        share = np.bincount(piece, on_parts) / np.bincount(piece)
+    rows, tris = _candidates_by_kind(Vf, T, P, np.arange(len(P)), np.ones(len(T), bool), kind, skin_tri,
+                                     candidates, 1.5 * fit.scale)
+    if not main.all():
+        landed = tris[_cheapest(rows, _facing_cost(Vf, T, tn, P, normals, rows, tris)[2], len(P))]
+        share = np.bincount(piece, ~skin_tri[landed]) / np.bincount(piece)
         kind = np.where(main, SKIN, np.where(share[piece] > 0.5, PARTS, SKIN))
+        others = np.flatnonzero(~main)        # their candidates again, among their piece's kind
+        r2, t2 = _candidates_by_kind(Vf, T, P, others, np.ones(len(T), bool), kind, skin_tri, candidates,
+                                     1.5 * fit.scale)
+        keep = main[rows]
+        rows, tris = np.r_[rows[keep], r2], np.r_[tris[keep], t2]
+    bary, dist, cost = _facing_cost(Vf, T, tn, P, normals, rows, tris)
+    pick = _cheapest(rows, cost, len(P))
     # the lips' slit and the lids' slit: the motion jumps across them, and a target vertex within a few
     # mm of one can land on the wrong side. Each side is a connected piece of the target's own mesh, so
     # the side is voted over its neighbours and the vertices that landed on the other side move back
@@ -328,8 +341,7 @@ def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: f
         r2 = np.searchsorted(move, r2)
         if r2.size == 0:
             continue
-        b2, d2 = _closest_on_triangles(P[move][r2], *(Vf[T[t2, j]] for j in range(3)))
-        c2 = d2 + FACING_PENALTY_MM * (1.0 - np.einsum("ij,ij->i", tn[t2], normals[move][r2]))
+        b2, d2, c2 = _facing_cost(Vf, T, tn, P[move], normals[move], r2, t2)
         p2 = _cheapest(r2, c2, move.size)
         has = p2 >= 0
         tri[move[has]], w[move[has]], best[move[has]] = t2[p2[has]], b2[p2[has]], d2[p2[has]]

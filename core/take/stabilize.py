@@ -13,9 +13,9 @@
 * Section 2.3 alternates the two. Here: the motion from the rigid markers alone, then
   the pivot (searched as a point fixed in the take's coordinates), then the motion again
   with the pivot as one more rigid point, placed each frame where the first motion puts it
-  smoothed in time (its sway; the window, 0.5-3 s, chosen by cross-validation: the pivot's place
-  at the reference frame tilts every frame's head frame, so the longest window the data allow). The pivot lies ~100 mm from the headband, so it steadies
-  the rotation, and a frame that lost one rigid marker is still posed from the two left.
+  smoothed in time (its sway; the window, 0.5-3 s, chosen by cross-validation: the pivot's
+  place at the reference frame tilts every frame's head frame, so the longest window the data
+  allow). The pivot lies ~100 mm from the headband, so it steadies the rotation, and a frame that lost one rigid marker is still posed from the two left.
   (Searching the pivot again over the sway-compensated markers makes every point a
   solution: the compensation moves the rotation onto the candidate, so one round it is.)
 * The rigid markers' shape is their mean over the take (each frame brought into the
@@ -52,7 +52,7 @@ MIN_PIVOT_ROTATION_DEG = 3.0
 GUESS_BELOW = 1.5
 GUESS_BEHIND_MM = 60.0
 # the pivot's sway is smoothed by a local quadratic over one of these windows (seconds; chosen by
-# cross-validation, :func:`_sway_window`) before it serves as a rigid point
+# cross-validation, :func:`_smoothed_sway`) before it serves as a rigid point
 SWAY_WINDOWS_S = (0.5, 1.0, 2.0, 3.0)
 PIVOT_POINT_WEIGHT = 1.0
 # the reference frame's pose (the head frame every frame is written in) from a local quadratic over this long
@@ -356,9 +356,8 @@ def stabilize(points, labels, rigid=None, method: str = "invariants", pivot="aut
         sway = R @ centre + t - centre
         frames = np.arange(F)
         sway = np.stack([np.interp(frames, frames[ok], sway[ok, c]) for c in range(3)], axis=1)
-        window = _sway_window(sway, fps)
+        window, sway = _smoothed_sway(sway, fps)
         st.sway_window_s = round(window / fps, 4)
-        sway = _local_quadratic(sway, window)
         if centre_for_motion is not None:
             R2, t2, ok2 = _motion(structure, pts, valid, idx, tri, method, pivot=(centre, sway))
             st.pose_source = np.where(ok2, np.where(ok, "rigid", "rigid+pivot"), "none").astype(object)
@@ -424,29 +423,32 @@ def _local_quadratic(values, window_frames: float):
     return savgol_filter(values, window, 2, axis=0, mode="interp")
 
 
-def _sway_window(sway, fps: float) -> int:
-    """The smoothing window (frames) of the pivot's sway ``(F, 3)``: the longest of ``SWAY_WINDOWS_S``
-    whose local quadratic predicts the frames it leaves out within one standard error of the best
-    (leave-one-out cross-validation, in closed form for a linear smoother: residual / (1 - the
-    filter's centre weight), over the inner frames; the one-standard-error rule). The sway is
-    slow and its estimate at the reference frame sets every frame's head frame, so the longest
-    window the data allow; a fast or large sway is followed with a short one."""
+def _smoothed_sway(sway, fps: float):
+    """The pivot's sway ``(F, 3)`` smoothed, and the window (frames) it took: the longest of
+    ``SWAY_WINDOWS_S`` whose local quadratic predicts the frames it leaves out within one standard
+    error of the best (leave-one-out cross-validation, in closed form for a linear smoother:
+    residual / (1 - the filter's centre weight), over the inner frames; the one-standard-error
+    rule). The sway is slow and its estimate at the reference frame sets every frame's head
+    frame, so the longest window the data allow; a fast or large sway is followed with a short one."""
     from scipy.signal import savgol_coeffs
 
-    scores = []
+    scores, smoothed = [], {}
     for seconds in SWAY_WINDOWS_S:
         window = _odd_window(seconds * fps, len(sway))
-        if window < 5 or (scores and window == scores[-1][0]):
+        if window < 5 or window in smoothed:
             continue
+        smoothed[window] = _local_quadratic(sway, window)
         h = savgol_coeffs(window, 2)[window // 2]
         inner = slice(window // 2, len(sway) - window // 2)
-        loss = np.sum(((sway - _local_quadratic(sway, window))[inner] / (1.0 - h)) ** 2, axis=1)
+        loss = np.sum(((sway - smoothed[window])[inner] / (1.0 - h)) ** 2, axis=1)
         if loss.size >= 10:
             scores.append((window, float(loss.mean()), float(loss.std() / np.sqrt(loss.size))))
     if not scores:
-        return _odd_window(SWAY_WINDOWS_S[0] * fps, len(sway))
+        window = _odd_window(SWAY_WINDOWS_S[0] * fps, len(sway))
+        return window, _local_quadratic(sway, window)
     best = min(scores, key=lambda s: s[1])
-    return max(w for w, cv, _ in scores if cv <= best[1] + best[2])
+    window = max(w for w, cv, _ in scores if cv <= best[1] + best[2])
+    return window, smoothed[window]
 
 
 def _smooth_pose(st: Stabilization, ok, centre, window_frames: float, reference_window_frames: float) -> None:
