@@ -58,7 +58,9 @@ contact-sheet: $(STAMP)
 # markers of 2.5 mm, mirrors at 35 deg: no marker in both mirrors) and turn, held out too (1600x900, +-18 deg yaw,
 # +-12 deg pitch, expressions twice as fast) and sparse, held out and refused (80 dots of 4 mm, face 550 mm away,
 # mirrors at 38 deg); close and jaw, held out (a face 480 mm from a wide lens with mirrors at 55 deg; expressions
-# 2.5 times as fast at 30 frames/s); webcam, held out (640x360, 120 dots of 3.5 mm). About 55 minutes on 2 cores.
+# 2.5 times as fast at 30 frames/s); webcam, held out (640x360, 120 dots of 3.5 mm); fast540 and fast720, held out
+# (expressions 3 and 2.2 times as fast at 30 frames/s; 960x540 with 180 dots of 3 mm, 1280x720 with 240 dots of
+# 2.5 mm). About 60 minutes on 2 cores.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -80,6 +82,12 @@ stress-clips: $(STAMP)
 		--markers 200 --marker-mm 2.5 --head-deg 8 10 6 --tempo 2.5 --frames 90 --samples 4 --seed 71 --no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/webcam --size 640 360 --focal 600 --distance 600 \
 		--mirror-deg 45 --markers 120 --marker-mm 3.5 --head-deg 8 10 4 --tempo 1.2 --frames 90 --samples 4 --seed 81 \
+		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/fast540 --size 960 540 --focal 900 --distance 600 \
+		--mirror-deg 42 --markers 180 --marker-mm 3 --head-deg 6 12 5 --tempo 3.0 --frames 90 --samples 4 --seed 91 \
+		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/fast720 --size 1280 720 --focal 1100 --distance 620 \
+		--mirror-deg 47 --markers 240 --marker-mm 2.5 --head-deg 8 8 3 --tempo 2.2 --frames 90 --samples 4 --seed 92 \
 		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin

@@ -268,3 +268,63 @@ def test_false_blobs_keep_off_every_markers_image(performance):
             assert gap.min() > 3.0
             dropped += int(np.sum(seen)) - int(np.sum(ids >= 0))
     assert dropped > 0  # some markers were in view but not detected
+
+
+def _labelled_take(measured, neutral, candidate):
+    """A TrackResult of ``measured (F, N)`` cells on clip candidates ``candidate (F, N)``."""
+    from mirrorcap.core.track.result import TrackResult
+
+    F, N = measured.shape
+    points = np.where(measured[..., None], np.asarray(neutral, float)[None], np.nan)
+    return TrackResult(labels=[f"m{i:03d}" for i in range(N)], points=points.copy(), conjectured=np.zeros((F, N), bool),
+                       camera_mask=np.where(measured, 3, 0), head_pose=np.zeros((F, 6)),
+                       neutral=np.asarray(neutral, float), first_blob=np.full(N, -1),
+                       assigned_blob=np.where(measured, candidate, -1), colour=np.zeros(N, int),
+                       head_frame=points.copy(), candidate=np.where(measured, candidate, -1), rigid=np.arange(N))
+
+
+def test_labels_on_one_pair_of_2d_tracks_are_one_marker():
+    """#18, the jaw clip: a chin dot moving 4-8 mm a frame along the line of sight was measured by
+    turns under two labels while the direct view's and a mirror's 2D tracks followed it throughout.
+    Two labels, never measured together, that are the only ones on one (direct track, mirror track)
+    pair merge; a third label on the pair, labels measured in one frame, or labels far apart do not."""
+    from mirrorcap.core.track.late import _shared_track_pairs, merge_along_2d_tracks
+
+    F = 12
+    # candidate c of frame f is c = f * 10 + slot; the slot names the dot's 2D tracks
+    slot_dtrack = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9])
+    slot_mtrack = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9])
+    dtrack = np.tile(slot_dtrack, F)
+    mtrack = np.c_[np.tile(slot_mtrack, F), np.full(10 * F, -1)]
+    cand = lambda slot: np.arange(F) * 10 + slot          # noqa: E731
+    neutral = [[0, 0, 600], [1, 0, 600], [0, 40, 600], [0, 41.5, 600], [0, 80, 600], [0, 81, 600], [0, 82, 600]]
+    measured = np.zeros((F, 7), bool)
+    candidate = np.full((F, 7), -1)
+    # labels 0 and 1: one dot, by turns (0 in frames 0-3 and 6-7, 1 in 4-5 and 8-11), on slot 0's
+    # tracks -- but in frames 0-3 on slot 5's (its 2D tracks broke at frame 4, in the fast motion),
+    # so label 1's first measurement does not continue label 0's last tracks (rule 2 does not apply)
+    for label, frames in ((0, [0, 1, 2, 3, 6, 7]), (1, [4, 5, 8, 9, 10, 11])):
+        measured[frames, label] = True
+        candidate[frames, label] = cand(0)[frames]
+    candidate[:4, 0] = cand(5)[:4]
+    # labels 2 and 3: on slot 1 by turns, but measured together in frame 5 (two dots)
+    for label, frames in ((2, [0, 1, 2, 5]), (3, [5, 6, 7, 8])):
+        measured[frames, label] = True
+        candidate[frames, label] = cand(1)[frames] if label == 2 else cand(2)[frames]
+    candidate[5, 3] = cand(2)[5]
+    mtrack[cand(2), 0] = 1                                   # slot 2's mirror track is slot 1's
+    dtrack[cand(2)] = 1
+    # labels 4, 5, 6: three labels on slot 3 by turns (rule 1 cannot tell which two are one; the
+    # handover along the mirror's track, rule 2, may join them in order)
+    for label, frames in ((4, [0, 1, 2, 3]), (5, [4, 5, 6, 7]), (6, [8, 9, 10, 11])):
+        measured[frames, label] = True
+        candidate[frames, label] = cand(3)[frames]
+    take = _labelled_take(measured, neutral, candidate)
+    assert _shared_track_pairs(take, dtrack, mtrack) == [(0, 1)]
+    merged = merge_along_2d_tracks(take, (dtrack, mtrack))
+    assert merged.labels[:3] == ["m000", "m002", "m003"]                          # 1 went into 0; 2, 3 stay
+    assert np.array_equal(merged.assigned_blob[:, 0] >= 0, np.ones(F, bool))     # the dot in every frame
+    assert np.array_equal(merged.candidate[:, 0], np.r_[cand(5)[:4], cand(0)[4:]])
+    # the same two labels far apart (beyond MERGE_SEARCH_MM) are two dots
+    far = _labelled_take(measured, [[0, 0, 600], [30, 0, 600], *neutral[2:]], candidate)
+    assert _shared_track_pairs(far, dtrack, mtrack) == []

@@ -269,19 +269,27 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
     return merge_labels(result, pairs)
 
 
-def merge_along_2d_tracks(result: TrackResult, mirror_track) -> TrackResult:
-    """Offline, a later chain of a marker merged back where a mirror kept the dot in view: the
-    earlier label's last measurement before the later label's first and that first measurement
-    sit on one unbroken 2D track of the same mirror (:func:`.pairing.track_2d`, per view over the
-    clip; ``mirror_track`` ``(C, K)``: each clip candidate's track per mirror, -1 none). Such a gap
-    is the direct view's alone -- a lower lip behind the upper one while the mouth moves sideways
-    8 mm in as many frames, which the neighbour relations cannot follow. Guards: the two labels
-    are never measured in the same frame, their neutral positions lie within
-    :data:`MERGE_SEARCH_MM`, no label measures that track in between, and only one earlier label
-    ends on it."""
+def merge_along_2d_tracks(result: TrackResult, tracks) -> TrackResult:
+    """Offline, labels of one dot merged where the 2D tracks say so (:func:`.pairing.track_2d`, per
+    view over the clip; ``tracks``: :func:`.pairing.candidate_tracks`, each clip candidate's direct
+    track ``(C,)`` and track per mirror ``(C, K)``, -1 none; None: nothing merged). Two labels never
+    measured in the same frame, whose neutral positions lie within :data:`MERGE_SEARCH_MM`, are one
+    dot when
+
+    1. they measure the same pair of 2D tracks -- the direct view's and a mirror's -- and no other
+       label does (:func:`_shared_track_pairs`): a chin dot that moves 4-8 mm a frame along the
+       line of sight during a fast jaw opening is lost and found again by turns, under two
+       labels, while both views follow it; or
+    2. the earlier label's last measurement before the later label's first and that first
+       measurement sit on one unbroken 2D track of the same mirror, no label measures that track
+       in between, and only one earlier label ends on it. Such a gap is the direct view's alone --
+       a lower lip behind the upper one while the mouth moves sideways 8 mm in as many frames,
+       which the neighbour relations cannot follow."""
     cand = result.candidate
-    if cand is None or mirror_track is None or len(mirror_track) == 0:
+    if cand is None or tracks is None or len(tracks[0]) == 0:
         return result
+    result = merge_labels(result, _shared_track_pairs(result, *tracks))
+    cand, mirror_track = result.candidate, tracks[1]
     measured = (result.assigned_blob >= 0) & (cand >= 0)
     F, N = measured.shape
     K = mirror_track.shape[1]
@@ -309,6 +317,45 @@ def merge_along_2d_tracks(result: TrackResult, mirror_track) -> TrackResult:
         if len(found) == 1:
             pairs.append((found.pop(), int(b)))
     return merge_labels(result, pairs)
+
+
+def _shared_track_pairs(result: TrackResult, direct_track, mirror_track) -> list:
+    """``(earlier, later)`` label pairs of :func:`merge_along_2d_tracks`, rule 1: the two labels
+    are the only ones measured on some (direct track, mirror track) pair, never in the same
+    frame, their neutral positions within :data:`MERGE_SEARCH_MM`; a label that would merge with
+    two others is left alone."""
+    cand = result.candidate
+    measured = (result.assigned_blob >= 0) & (cand >= 0)
+    N = measured.shape[1]
+    f, m = np.nonzero(measured)
+    c = cand[f, m]
+    K = mirror_track.shape[1]
+    n_direct = int(direct_track.max(initial=-1)) + 1
+    keys, labels = [], []
+    for k in range(K):
+        on = (mirror_track[c, k] >= 0) & (direct_track[c] >= 0)
+        keys.append((mirror_track[c[on], k].astype(np.int64) * n_direct + direct_track[c[on]]) * K + k)
+        labels.append(m[on])
+    key_label = np.unique(np.c_[np.concatenate(keys), np.concatenate(labels)], axis=0)
+    if key_label.size == 0:
+        return []
+    key, label = key_label[:, 0], key_label[:, 1]
+    start = np.r_[True, key[1:] != key[:-1]]
+    group = np.cumsum(start) - 1
+    size = np.bincount(group)
+    two = size[group] == 2                                   # exactly two labels on the track pair
+    a, b = label[two & start], label[two & ~start]
+    if a.size == 0:
+        return []
+    first = np.argmax(measured, axis=0)
+    together = measured_together(measured)
+    close = np.linalg.norm(result.neutral[a] - result.neutral[b], axis=1) <= MERGE_SEARCH_MM
+    ok = ~together[a, b] & close
+    early = np.where(first[a] <= first[b], a, b)[ok]
+    late = np.where(first[a] <= first[b], b, a)[ok]
+    pairs = np.unique(np.c_[early, late], axis=0)
+    count = np.bincount(pairs.ravel(), minlength=N)
+    return [(int(x), int(y)) for x, y in pairs if count[x] == 1 and count[y] == 1]
 
 
 def merge_labels(result: TrackResult, pairs) -> TrackResult:

@@ -263,7 +263,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
     result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
     result = merge_split_labels(result, s)
-    result = merge_along_2d_tracks(result, candidate_tracks(det, cands)[1] if s.follow_2d_tracks else None)
+    result = merge_along_2d_tracks(result, candidate_tracks(det, cands) if s.follow_2d_tracks else None)
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
