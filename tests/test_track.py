@@ -291,11 +291,9 @@ def test_labels_on_one_pair_of_2d_tracks_are_one_marker():
     from mirrorcap.core.track.late import _shared_track_pairs, merge_along_2d_tracks
 
     F = 12
-    # candidate c of frame f is c = f * 10 + slot; the slot names the dot's 2D tracks
-    slot_dtrack = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9])
-    slot_mtrack = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9])
-    dtrack = np.tile(slot_dtrack, F)
-    mtrack = np.c_[np.tile(slot_mtrack, F), np.full(10 * F, -1)]
+    # candidate c of frame f is c = f * 10 + slot; slot s lies on direct track s and mirror-0 track s
+    dtrack = np.tile(np.arange(10), F)
+    mtrack = np.c_[dtrack, np.full(10 * F, -1)]
     cand = lambda slot: np.arange(F) * 10 + slot          # noqa: E731
     neutral = [[0, 0, 600], [1, 0, 600], [0, 40, 600], [0, 41.5, 600], [0, 80, 600], [0, 81, 600], [0, 82, 600]]
     measured = np.zeros((F, 7), bool)

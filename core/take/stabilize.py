@@ -15,7 +15,8 @@
   with the pivot as one more rigid point, placed each frame where the first motion puts it
   smoothed in time (its sway; the window, 0.5-3 s, chosen by cross-validation: the pivot's
   place at the reference frame tilts every frame's head frame, so the longest window the data
-  allow). The pivot lies ~100 mm from the headband, so it steadies the rotation, and a frame that lost one rigid marker is still posed from the two left.
+  allow). The pivot lies ~100 mm from the headband, so it steadies the rotation, and a frame
+  that lost one rigid marker is still posed from the two left.
   (Searching the pivot again over the sway-compensated markers makes every point a
   solution: the compensation moves the rotation onto the candidate, so one round it is.)
 * The rigid markers' shape is their mean over the take (each frame brought into the

@@ -336,17 +336,12 @@ def _shared_track_pairs(result: TrackResult, direct_track, mirror_track) -> list
         on = (mirror_track[c, k] >= 0) & (direct_track[c] >= 0)
         keys.append((mirror_track[c[on], k].astype(np.int64) * n_direct + direct_track[c[on]]) * K + k)
         labels.append(m[on])
-    key_label = np.unique(np.c_[np.concatenate(keys), np.concatenate(labels)], axis=0)
-    if key_label.size == 0:
+    key_label = np.unique(np.c_[np.concatenate(keys), np.concatenate(labels)], axis=0)   # sorted by key
+    _, first_row, n_labels = np.unique(key_label[:, 0], return_index=True, return_counts=True)
+    two = first_row[n_labels == 2]                           # exactly two labels on the track pair
+    if two.size == 0:
         return []
-    key, label = key_label[:, 0], key_label[:, 1]
-    start = np.r_[True, key[1:] != key[:-1]]
-    group = np.cumsum(start) - 1
-    size = np.bincount(group)
-    two = size[group] == 2                                   # exactly two labels on the track pair
-    a, b = label[two & start], label[two & ~start]
-    if a.size == 0:
-        return []
+    a, b = key_label[two, 1], key_label[two + 1, 1]
     first = np.argmax(measured, axis=0)
     together = measured_together(measured)
     close = np.linalg.norm(result.neutral[a] - result.neutral[b], axis=1) <= MERGE_SEARCH_MM
