@@ -220,7 +220,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     withheld = int(sum(report["per_frame"].get("withheld", [])))  # conjectures left as gaps
     summary = {
         "clip": {"frames": int(source.frame_count), "fps": fps, "size": list(source.size)},
-        "tracking": {**{k: v for k, v in score.items() if k not in ("ids", "aligned", "error_mm")},
+        "tracking": {**{k: v for k, v in score.items() if not isinstance(v, np.ndarray)},
                      "withheld": withheld, "withheld_fraction": withheld / max(score["aligned"].shape[0]
                                                                                  * score["aligned"].shape[1], 1)},
         "tracking_report": {"units": report["units"], "mirrors": report["mirrors"],

@@ -2,14 +2,22 @@
 
 The tracker's labels (``m000``..) are its own, and a self-calibrated take is in relative
 units: a global scale about the camera centre. Projections into the image do not see that
-scale, so identities are found in the image:
+scale, so identities are first found in the image:
 
 1. each tracked marker's true identity is the majority, over the frames where it was
    measured, of the true marker whose projection is nearest to its own (within
    ``match_px``);
 2. one similarity transform (Umeyama), fitted over every measured marker-frame of the
-   clip, brings the take onto the truth; the 3D error is what remains, in truth units (mm).
-   Conjectured points are scored separately under the same transform.
+   clip, brings the take onto the truth. Each identity is then checked in 3D: it becomes
+   the majority of the true marker nearest in 3D over the same frames when that marker
+   projects within ``match_px`` of the tracked one too (median; the image cannot tell the
+   two apart), and the similarity is fitted again (``ids_image`` keeps step 1's,
+   ``ids_reassigned_in_3d`` counts the changes). Near the silhouette a dot hidden in the
+   direct view -- on the cheek, 13 mm behind a dot on the nose's far side -- can project
+   nearer a tracked point than the dot it measures. A point measured too deep, nearer
+   another dot in 3D that projects elsewhere, keeps its identity: a switch in step 3.
+   The 3D error is what remains, in truth units (mm). Conjectured points are scored
+   separately under the same transform.
 3. an identity switch is a measured marker-frame that lies nearer another true marker than
    its own, in 3D after the alignment (the 3D test: in one camera's image, two markers seen
    only in a mirror near the face's silhouette can project within 2 px of each other while
@@ -30,6 +38,25 @@ import numpy as np
 from ..core.common.errors import InputError
 from ..core.geometry.camera import Camera
 from ..core.geometry.rigid import similarity_fit
+
+
+def _align(P, T, ids, ok):
+    """Step 2 and the 3D test of step 3: the similarity over the marker-frames ``ok`` of ``P``
+    onto ``T`` under ``ids``; returns the aligned take, each point's 3D error against its own
+    true marker and the true marker nearest it in 3D (-1 where not in ``ok``)."""
+    from scipy.spatial import cKDTree
+
+    f_idx, m_idx = np.nonzero(ok)
+    s, R, t = similarity_fit(P[f_idx, m_idx], T[f_idx, ids[m_idx]])
+    aligned = s * P @ R.T + t
+    err = np.linalg.norm(aligned - T[:, np.maximum(ids, 0)], axis=2)
+    nearest_3d = np.full(ok.shape, -1)
+    for f in range(P.shape[0]):
+        idx = np.flatnonzero(ok[f])
+        present = np.flatnonzero(np.all(np.isfinite(T[f]), axis=1))
+        if idx.size and present.size:
+            nearest_3d[f, idx] = present[cKDTree(T[f, present]).query(aligned[f, idx])[1]]
+    return aligned, err, nearest_3d, s
 
 
 def score_take(points, truth, camera: Camera, conjectured=None, match_px: float = 2.0, seen=None) -> dict:
@@ -60,23 +87,24 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
         v = nearest[measured[:, m] & (near_px[:, m] <= match_px), m]
         if v.size:
             ids[m] = np.bincount(v).argmax()
-    switches_image = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest != ids[None, :])))
-    off_marker = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest == ids[None, :])
-                                      & (near_px > match_px)))
     ok = measured & (ids[None, :] >= 0)
     if ok.sum() < 3:
         raise InputError("fewer than 3 tracked points match the truth: nothing to score")
-    f_idx, m_idx = np.nonzero(ok)
-    s, R, t = similarity_fit(P[f_idx, m_idx], T[f_idx, ids[m_idx]])
-    aligned = s * P @ R.T + t
-    err = np.linalg.norm(aligned - T[:, np.maximum(ids, 0)], axis=2)
-    nearest_3d = np.full((F, M), -1)
-    for f in range(F):
-        idx = np.flatnonzero(measured[f] & (ids >= 0))
-        present = np.flatnonzero(np.all(np.isfinite(T[f]), axis=1))
-        if idx.size and present.size:
-            nearest_3d[f, idx] = present[cKDTree(T[f, present]).query(aligned[f, idx])[1]]
-    switches = int(np.count_nonzero(measured & (ids[None, :] >= 0) & (nearest_3d != ids[None, :])))
+    ids_image = ids.copy()
+    aligned, err, nearest_3d, scale = _align(P, T, ids, ok)
+    for m in np.flatnonzero(ids >= 0):  # step 2's check of each identity in 3D
+        f_m = np.flatnonzero(ok[:, m] & (nearest_3d[:, m] >= 0))
+        if f_m.size == 0:
+            continue
+        k = np.bincount(nearest_3d[f_m, m]).argmax()
+        px = np.linalg.norm(camera.project(T[f_m, k]) - camera.project(P[f_m, m]), axis=1)
+        if k != ids[m] and np.median(px) <= match_px:  # the image cannot tell the two apart
+            ids[m] = k
+    if np.any(ids != ids_image):
+        aligned, err, nearest_3d, scale = _align(P, T, ids, ok)
+    switches_image = int(np.count_nonzero(ok & (nearest != ids[None, :])))
+    off_marker = int(np.count_nonzero(ok & (nearest == ids[None, :]) & (near_px > match_px)))
+    switches = int(np.count_nonzero(ok & (nearest_3d != ids[None, :])))
     e = err[ok]
     cj = conj & reported & (ids[None, :] >= 0)
     ce = err[cj]
@@ -106,5 +134,6 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
         "conjectured": int(cj.sum()),
         "conjectured_rms_mm": float(np.sqrt(np.mean(ce ** 2))) if ce.size else 0.0,
         "conjectured_max_mm": float(ce.max()) if ce.size else 0.0,
-        "scale_to_mm": s, "ids": ids, "aligned": aligned, "error_mm": err,
+        "ids_reassigned_in_3d": int(np.count_nonzero(ids != ids_image)),
+        "scale_to_mm": scale, "ids": ids, "ids_image": ids_image, "aligned": aligned, "error_mm": err,
     }

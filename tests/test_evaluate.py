@@ -54,3 +54,30 @@ def test_completeness_counts_seen_marker_frames_reported_under_the_markers_label
     assert s["unreported_seen"][10:20, 5].all() and s["unreported_seen"].sum() == 10 + F
     with pytest.raises(InputError):
         score_take(take, truth, rig.camera, seen=seen[:, :10])
+
+
+def test_identity_found_in_the_image_is_checked_in_3d():
+    """A dot hidden in the direct view (13 mm deeper on the tracked point's ray: behind the nose)
+    projects nearer the point than the dot the point measures, 0.3 mm off it in 3D. The label is
+    the dot it measures: no switch, a 0.3 mm error, the image's pick kept in ``ids_image``. A
+    point measured 10 mm too deep keeps its own dot, though another lies 3 mm from it in 3D: the
+    image tells those two apart."""
+    rig = face_rig(n_markers=60, seed=3)
+    F = 12
+    truth = np.repeat(rig.points[None], F, axis=0)
+    take = truth.copy()
+    k, j = 17, 40
+    take[:, k] += np.array([0.3, 0.0, 0.0])
+    ray_k = take[0, k] / np.linalg.norm(take[0, k])
+    hidden = take[:, k] + 13.0 * ray_k  # on the point's own ray: projects onto it
+    ray_j = truth[0, j] / np.linalg.norm(truth[0, j])
+    take[:, j] += 10.0 * ray_j  # a depth error (a mirror plane off)
+    beside = take[:, j] + 3.0 * np.cross(ray_j, [0.0, 1.0, 0.0]) / np.linalg.norm(np.cross(ray_j, [0.0, 1.0, 0.0]))
+    assert np.linalg.norm(rig.camera.project(beside[:1]) - rig.camera.project(take[:1, j])) > 3.0
+    truth = np.concatenate([truth, hidden[:, None], beside[:, None]], axis=1)
+    s = score_take(take, truth, rig.camera)
+    assert s["ids_image"][k] == 60 and s["ids"][k] == k
+    assert s["ids"][j] == j and s["ids_reassigned_in_3d"] == 1
+    assert s["identity_switches"] == F  # marker j's frames, nearer the dot beside it
+    err = s["error_mm"]
+    assert np.allclose(err[:, k], 0.3, atol=0.05) and np.allclose(err[:, j], 10.0, atol=0.5)  # the similarity takes a little
