@@ -97,7 +97,7 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
         if f_m.size == 0:
             continue
         k = np.bincount(nearest_3d[f_m, m]).argmax()
-        px = np.linalg.norm(camera.project(T[f_m, k]) - camera.project(P[f_m, m]), axis=1)
+        px = np.linalg.norm(camera.project(T[f_m, k]) - camera.project(aligned[f_m, m]), axis=1)
         if k != ids[m] and np.median(px) <= match_px:  # the image cannot tell the two apart
             ids[m] = k
     if np.any(ids != ids_image):

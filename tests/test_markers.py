@@ -270,7 +270,7 @@ def test_fragments_merge_within_the_frames_typical_dot():
 def test_a_clump_of_two_colours_splits_by_pixel_class_when_asked():
     """ExtractionSettings(split_clumps=True) (off by default: measured and not kept, README): a blob of
     two touching dots of two colours, twice a typical dot's area and elongated, comes back as two dots
-    near their centres; by default it stays one blob."""
+    near their centres; with neither split it stays one blob."""
     img = np.zeros((200, 300, 3), np.uint8)
     yy, xx = np.mgrid[0:200, 0:300]
     for i in range(12):                                   # typical dots, apart
@@ -278,9 +278,37 @@ def test_a_clump_of_two_colours_splits_by_pixel_class_when_asked():
         img[(xx - cx) ** 2 + (yy - cy) ** 2 <= 9] = CLASS_RGB[i % 2][::-1]
     for cx, k in ((100, 2), (106, 3)):                    # touching, dark blue and purple: the mix is no paler
         img[(xx - cx) ** 2 + (yy - 120) ** 2 <= 9] = CLASS_RGB[k][::-1]
-    whole = mk.extract_markers(img, mk.ColorClasses.default())
-    split = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(split_clumps=True))
+    whole = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(split_touching=False))
+    split = mk.extract_markers(img, mk.ColorClasses.default(),
+                               mk.ExtractionSettings(split_clumps=True, split_touching=False))
     assert len(whole) == 13 and len(split) == 14
     pair = split.y > 100
     assert np.allclose(np.sort(split.x[pair]), [100, 106], atol=0.6)
     assert sorted(split.color[pair].tolist()) == [2, 3]
+
+
+def test_two_touching_dots_of_one_colour_come_back_as_two():
+    """``split_touching`` (the default): two overlapping dots of one colour (centres 5 px apart, radius
+    3 px) make one blob twice a typical dot's area, centred between them; it is cut across its long
+    axis into two dots within 0.25 px of their own pixels' centres. A dot twice as large as the others but round,
+    and a foreshortened dot (an ellipse of a typical dot's area), stay whole."""
+    img = np.zeros((200, 300, 3), np.uint8)
+    yy, xx = np.mgrid[0:200, 0:300]
+    for i in range(12):                                   # typical dots, apart
+        img[(xx - 20 - 22 * i) ** 2 + (yy - 30) ** 2 <= 9] = CLASS_RGB[i % 2][::-1]
+    pair = np.array([[100.3, 120.2], [104.1, 123.3]])     # 4.9 px apart, along a slant
+    for cx, cy in pair:
+        img[(xx - cx) ** 2 + (yy - cy) ** 2 <= 9] = CLASS_RGB[1][::-1]
+    img[(xx - 200) ** 2 + (yy - 120) ** 2 <= 20] = CLASS_RGB[0][::-1]                   # large, round
+    img[((xx - 250) / 5.0) ** 2 + ((yy - 120) / 1.8) ** 2 <= 1] = CLASS_RGB[2][::-1]    # foreshortened
+    whole = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(split_touching=False))
+    split = mk.extract_markers(img, mk.ColorClasses.default())
+    assert len(whole) == 15 and len(split) == 16
+    lower = split.y > 100
+    assert sorted(np.round(split.x[lower]).tolist()) == [100, 104, 200, 250]
+    found = np.c_[split.x[lower], split.y[lower]][np.argsort(split.x[lower])][:2]
+    drawn = np.array([[xx[d].mean(), yy[d].mean()] for d in ((xx - pair[:, :1, None]) ** 2
+                                                              + (yy - pair[:, 1:, None]) ** 2 <= 9)])
+    assert np.linalg.norm(found - drawn, axis=1).max() < 0.25   # each dot's own pixels' centre
+    between = np.c_[whole.x, whole.y][np.abs(whole.x - 102.2) < 3]
+    assert np.linalg.norm(between - drawn.mean(axis=0)) < 0.3  # unsplit: the clump's centre, between the dots

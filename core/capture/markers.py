@@ -25,7 +25,11 @@ Per frame, vectorised over pixels and components (no per-marker Python loop):
    parts that pass the test are kept (touching markers come back, but intermittently, as
    late markers that lower a take's completeness: off by default). Both must hold: a marker
    near the face's silhouette is foreshortened into an ellipse but keeps its colour, and a
-   pale round blob may be a marker washed out by the lamp.
+   pale round blob may be a marker washed out by the lamp. Before the test, a blob of two
+   touching dots -- at least ``CLUMP_AREA`` times the frame's median area and elongated (a
+   foreshortened dot is smaller, not larger) -- is cut in two across its long axis where a
+   weighted 2-means along it puts the cut (``split_touching``): its centroid lies half a dot
+   spacing from either dot, each piece's within a tenth of a radius of its own.
 
 OpenCV is used single-threaded by the benchmarks; the extractor reuses its frame
 buffers between frames (:class:`MarkerExtractor`).
@@ -183,6 +187,7 @@ class ExtractionSettings:
     max_elongation: float = 2.0  # ... and longer than this many times its width is not a marker
     split_pale_blobs: bool = False  # split such a blob by per-pixel class and keep its saturated parts
     split_clumps: bool = False  # split a blob of 1.8x a typical dot's area, elongated, by per-pixel class
+    split_touching: bool = True  # split such a blob in two across its long axis (touching dots, any colours)
     # normal light (.colordots)
     min_difference: int = 20  # levels in some channel from the local background (first cut)
     min_contrast: float = 0.05  # chromaticity distance from the local background
@@ -200,6 +205,31 @@ class ExtractionSettings:
 
 
 CLUMP_AREA = 1.8  # a clump of touching dots: at least this many times the frame's median blob area
+TOUCHING_ELONGATION = 1.6  # ... and this elongated (two equal discs 1.5 radii apart: 1.8; touching: 2.2)
+TWO_MEANS_ROUNDS = 4  # rounds of the 1-D 2-means along a clump's long axis
+
+
+def _split_across_long_axis(sums, blob, wgt, xs, ys):
+    """Each blob of ``blob`` (per pixel: the index of the clump it belongs to, ``(P,)``; ``sums``
+    the clumps' own :func:`_blob_sums`) cut in two across its long axis, where a weighted 2-means
+    of the pixels' positions along that axis puts the cut. Returns each pixel's piece,
+    ``2 * blob + side``. Two touching dots of one colour make such a clump: each piece's centroid
+    lies within a tenth of a radius of its dot's centre while the clump's lies half a spacing off."""
+    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
+    sxx = sums[:, 8] / sums[:, 0] - cx * cx
+    syy = sums[:, 9] / sums[:, 0] - cy * cy
+    sxy = sums[:, 10] / sums[:, 0] - cx * cy
+    angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)            # the long axis
+    along = (xs - cx[blob]) * np.cos(angle)[blob] + (ys - cy[blob]) * np.sin(angle)[blob]
+    cut = np.zeros(len(sums))
+    n = 2 * len(sums)
+    for _ in range(TWO_MEANS_ROUNDS):
+        side = (along >= cut[blob]).astype(np.intp)
+        piece = 2 * blob + side
+        w = np.bincount(piece, wgt, n)
+        mean = np.bincount(piece, wgt * along, n) / np.maximum(w, 1e-12)
+        cut = 0.5 * (mean[0::2] + mean[1::2])
+    return 2 * blob + (along >= cut[blob])
 
 
 def merge_marker_fragments(sums, cls, settings: ExtractionSettings):
@@ -284,10 +314,18 @@ class MarkerExtractor:
             group = np.arange(sums.shape[0])  # each component's marker
         else:
             cls = self.colors.classify(sums[:, 5:8])
-        # step 7, the blob test; a failing blob of two touching markers of different colours is
-        # split by the class of each pixel (the paper's per-pixel labelling) and its saturated parts kept
+        pixel_blob = None
         cx, cy, elongation, rgb, saturation = blob_shape(sums)
         odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
+        if s.split_touching and sums.shape[0] >= 10:
+            touching = (sums[:, 3] >= CLUMP_AREA * np.median(sums[:, 3])) & (elongation > TOUCHING_ELONGATION) & ~odd
+            if touching.any():
+                sums, cls, pixel_blob = self._split_touching(sums, cls, group, lab, touching, wgt, xs, ys,
+                                                             r, g, b, t)
+                cx, cy, elongation, rgb, saturation = blob_shape(sums)
+                odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
+        # step 7, the blob test; a failing blob of two touching markers of different colours is
+        # split by the class of each pixel (the paper's per-pixel labelling) and its saturated parts kept
         keep = (sums[:, 3] >= s.min_area) & ~odd
         split = odd if s.split_pale_blobs else np.zeros_like(odd)
         if s.split_clumps and sums.shape[0] >= 10:
@@ -298,9 +336,10 @@ class MarkerExtractor:
             keep &= ~clump
         if split.any():
             odd = split
-            pix = np.flatnonzero(odd[group][lab - 1] & (lab > 0))
+            pixel_blob = group[lab - 1] if pixel_blob is None else pixel_blob()
+            pix = np.flatnonzero(odd[pixel_blob])
             pc = self.colors.classify(np.c_[r[pix], g[pix], b[pix]])
-            key = group[lab[pix] - 1] * len(self.colors.names) + pc
+            key = pixel_blob[pix] * len(self.colors.names) + pc
             pieces, inv = np.unique(key, return_inverse=True)
             part = _blob_sums(inv, pieces.size, wgt[pix], xs[pix], ys[pix], r[pix], g[pix], b[pix], t)
             pcx, pcy, pel, prgb, psat = blob_shape(part)
@@ -311,6 +350,29 @@ class MarkerExtractor:
             keep = np.ones(sums.shape[0], bool)
         return Detections(x=cx[keep], y=cy[keep], color=cls[keep], area=sums[keep, 3].astype(int),
                           intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep])
+
+
+    def _split_touching(self, sums, cls, group, lab, touching, wgt, xs, ys, r, g, b, t):
+        """``split_touching``: each blob of ``touching`` (at least :data:`CLUMP_AREA` times the frame's
+        median area, more elongated than :data:`TOUCHING_ELONGATION`, not pale: teeth, glints) is
+        replaced by the two pieces :func:`_split_across_long_axis` cuts it into, each classed by its
+        own mean colour. ``group``: each component's blob, ``lab``: each pixel's component (from 1).
+        Returns the new sums and classes, and a function giving each pixel's new blob (for the
+        per-pixel class split, when asked for: the whole frame's pixels are not touched otherwise)."""
+        pix = np.flatnonzero(touching[group][lab - 1])
+        rank = np.cumsum(touching) - 1
+        piece = _split_across_long_axis(sums[touching], rank[group[lab[pix] - 1]], wgt[pix], xs[pix], ys[pix])
+        part = _blob_sums(piece, 2 * int(touching.sum()), wgt[pix], xs[pix], ys[pix], r[pix], g[pix], b[pix], t)
+        whole = np.flatnonzero(~touching)
+
+        def pixel_blob():
+            renumber = np.full(len(sums), -1)
+            renumber[whole] = np.arange(whole.size)
+            out = renumber[group[lab - 1]]
+            out[pix] = whole.size + piece
+            return out
+
+        return np.r_[sums[whole], part], np.r_[cls[whole], self.colors.classify(part[:, 5:8])], pixel_blob
 
 
 def _blob_sums(label, n, wgt, xs, ys, r, g, b, threshold) -> np.ndarray:

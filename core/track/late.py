@@ -14,7 +14,7 @@ from ..geometry.rigid import rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates
 from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
-from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place
+from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, keep_measured
 
 
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
@@ -388,3 +388,59 @@ def merge_labels(result: TrackResult, pairs) -> TrackResult:
         remap[idx] = np.arange(idx.size)
         out.rigid = remap[np.asarray(result.rigid)][remap[np.asarray(result.rigid)] >= 0]
     return out
+
+
+def lost_markers(result: TrackResult, s: TrackSettings) -> tuple:
+    """The markers lost for good (:func:`.result.earns_place`) -- a wrong direct/mirror pairing
+    whose 3D point stops matching real candidates, or a real marker whose dot a later label picked
+    up: their labels, and their measurements as ``(frame, direct blob)`` codes (frame *
+    :data:`BLOB_CODE` + blob) for :func:`settle_lost_markers`."""
+    measured = result.assigned_blob >= 0
+    lost = ~earns_place(measured, s.min_measured_frames, s.min_measured_fraction)
+    f, m = np.nonzero(measured & lost[None])
+    return frozenset(np.asarray(result.labels, dtype=object)[lost]), f * BLOB_CODE + result.assigned_blob[f, m]
+
+
+BLOB_CODE = 1 << 20  # frame * BLOB_CODE + blob: one code per (frame, direct blob)
+INTERLEAVE_FRAMES = 2  # a lost marker's point bracketed by another's measurements this near
+
+
+def settle_lost_markers(result: TrackResult, codes, gate_mm: float) -> TrackResult:
+    """After the dots were followed through gaps and labels found to be one dot merged
+    (:func:`.singleview.follow_dots_through_gaps`): the measurements of markers lost for good
+    (``codes``, :func:`lost_markers`) go with their marker when nothing else joined it. Where they
+    joined another label's measurements they stay only if they lie on its path: at the lost
+    measurements bracketed by the other's within :data:`INTERLEAVE_FRAMES` frames on both sides, the
+    median distance (head frame) from the line between those is at most ``gate_mm``. (On jaw a chin
+    dot's first 18 frames come back this way; a wrong pairing interleaved with the true marker's
+    measurements lies 7-8 mm off its path.)"""
+    measured = result.assigned_blob >= 0
+    f, m = np.nonzero(measured)
+    suspect = np.zeros_like(measured)
+    suspect[f, m] = np.isin(f * BLOB_CODE + result.assigned_blob[f, m], codes)
+    other = measured & ~suspect
+    drop = np.zeros_like(measured)
+    H = result.head_frame
+    for label in np.flatnonzero(suspect.any(axis=0)):
+        own = np.flatnonzero(suspect[:, label])
+        if not other[:, label].any():
+            drop[own, label] = True
+            continue
+        theirs = np.flatnonzero(other[:, label])
+        after = np.searchsorted(theirs, own)
+        lo, hi = theirs[np.maximum(after - 1, 0)], theirs[np.minimum(after, theirs.size - 1)]
+        inside = (after > 0) & (after < theirs.size) & (own - lo <= INTERLEAVE_FRAMES) & (hi - own <= INTERLEAVE_FRAMES)
+        if inside.any():
+            w = ((own - lo) / np.maximum(hi - lo, 1))[inside, None]
+            path = (1 - w) * H[lo[inside], label] + w * H[hi[inside], label]
+            if np.median(np.linalg.norm(H[own[inside], label] - path, axis=1)) > gate_mm:
+                drop[own, label] = True
+    if drop.any():
+        result.assigned_blob[drop] = -1
+        result.points[drop] = np.nan
+        result.head_frame[drop] = np.nan
+        result.conjectured[drop] = False
+        result.camera_mask[drop] = 0
+        if result.candidate is not None:
+            result.candidate[drop] = -1
+    return keep_measured(result, 1)

@@ -378,7 +378,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
 
 
 def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                 settings: TrackSettings, limit: float, per_frame, tried=None) -> list:
+                 settings: TrackSettings, limit: float, per_frame, tried=None, passive=()) -> list:
     """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
     ends. From the last frame a marker was measured in (and backwards from the next), its direct
     blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
@@ -404,13 +404,15 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     the same frame as this one, its point within the gate of this one's prediction -- has found the
     same dot under a second label (a split): it votes ``(this, other)``. Updates ``result`` in
     place, adds the cells measured to ``per_frame``; returns the votes. ``tried``: a set of the
-    chain starts tried before (frame, marker, direction), skipped and added to."""
+    chain starts tried before (frame, marker, direction), skipped and added to. ``passive``: labels
+    whose gaps are not followed (a chain of another label may still reach them and vote)."""
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
     F, N = result.assigned_blob.shape
     measured = result.assigned_blob >= 0
     settled = measured.sum(axis=0) >= SETTLED_FACTOR * settings.min_measured_frames
+    settled &= ~np.isin(np.asarray(result.labels, dtype=object), list(passive))
     votes = []
     if K == 0 or not settled.any():
         return votes
@@ -538,7 +540,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
 
 
 def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                             settings: TrackSettings, limit: float) -> TrackResult:
+                             settings: TrackSettings, limit: float, passive=()) -> TrackResult:
     """Each marker's dots followed into its gaps (:func:`_follow_once`), in :data:`FOLLOW_ROUNDS`
     rounds (a second starts again where a chain stopped -- two chains that reached one blob, a
     chain that coasted out -- and follows the merged markers' new gaps); after each, labels found
@@ -550,7 +552,8 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
     result.stats["followed_through_gaps"] = per_frame
     tried = set()
     for _ in range(FOLLOW_ROUNDS):
-        votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, limit, per_frame, tried=tried)
+        votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, limit, per_frame, tried=tried,
+                             passive=passive)
         measured = result.assigned_blob >= 0
         first = np.argmax(measured, axis=0)
         together = measured_together(measured)

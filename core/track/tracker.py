@@ -43,7 +43,7 @@ from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
-from .late import add_late_markers, merge_along_2d_tracks, merge_split_labels
+from .late import add_late_markers, lost_markers, merge_along_2d_tracks, merge_split_labels, settle_lost_markers
 from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
 from .motion import (
     RELATION_CORRELATION,
@@ -261,14 +261,18 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.rigid = given
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
     result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
-    result = keep_measured(result, s.min_measured_frames, s.min_measured_fraction)
+    result = keep_measured(result, s.min_measured_frames)
     result = merge_split_labels(result, s)
     result = merge_along_2d_tracks(result, candidate_tracks(det, cands) if s.follow_2d_tracks else None)
+    # a marker lost for good (keep_measured) goes, unless its dot is followed into a later label of it
+    passive, lost = lost_markers(result, s)
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
-        result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit)
+        result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit,
+                                          passive=passive)
         result = merge_split_labels(result, s)  # the followed dots steady the earlier marker's conjecture
+    result = settle_lost_markers(result, lost, s.gate_mm)
     conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
         measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s, limit)
