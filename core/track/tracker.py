@@ -262,10 +262,10 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
     result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
     result = keep_measured(result, s.min_measured_frames)
-    result = merge_split_labels(result, s)
-    result = merge_along_2d_tracks(result, candidate_tracks(det, cands) if s.follow_2d_tracks else None)
     # a marker lost for good (keep_measured) goes, unless its dot is followed into a later label of it
     passive, lost = lost_markers(result, s)
+    result = merge_split_labels(result, s)
+    result = merge_along_2d_tracks(result, candidate_tracks(det, cands) if s.follow_2d_tracks else None)
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
