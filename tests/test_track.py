@@ -326,3 +326,38 @@ def test_labels_on_one_pair_of_2d_tracks_are_one_marker():
     # the same two labels far apart (beyond MERGE_SEARCH_MM) are two dots
     far = _labelled_take(measured, [[0, 0, 600], [30, 0, 600], *neutral[2:]], candidate)
     assert _shared_track_pairs(far, dtrack, mtrack) == []
+
+
+def test_a_lost_markers_measurements_stay_only_on_the_path_of_the_label_they_joined():
+    """core.track.late.settle_lost_markers: the measurements of markers lost for good (codes of
+    (frame, direct blob)) go with a label that holds nothing else; where another label's measurements
+    joined them they stay when, bracketed by those, they lie on its path -- a chin dot's first frames
+    before its later label -- and go when they lie off it: a wrong pairing interleaved with the
+    true marker, 7 mm away."""
+    from mirrorcap.core.track.late import BLOB_CODE, settle_lost_markers
+    from mirrorcap.core.track.result import TrackResult
+
+    F, N = 30, 3
+    t = np.arange(F, dtype=float)
+    head_frame = np.stack([np.c_[t, 0 * t, 0 * t] + [0.0, 10.0 * n, 0.0] for n in range(N)], axis=1)  # 1 mm a frame
+    blob = np.tile(np.arange(N), (F, 1))
+    lost = np.zeros((F, N), bool)
+    lost[:6, 0] = True                    # marker 0: its first label's 6 frames, then a gap, then its later label
+    blob[6:8, 0] = -1
+    lost[11:20:2, 1] = True               # marker 1: a wrong pairing, every other frame, 7 mm off the path
+    head_frame[11:20:2, 1, 2] += 7.0
+    blob[:, 2] = np.where(t < 12, 2, -1)  # marker 2: lost for good, nothing joined it
+    lost[:12, 2] = True
+    measured = blob >= 0
+    head_frame[~measured] = np.nan
+    result = TrackResult(labels=["m000", "m001", "m002"], points=head_frame.copy(), conjectured=~measured,
+                         camera_mask=np.where(measured, 3, 0), head_pose=np.zeros((F, 6)), neutral=head_frame[0].copy(),
+                         first_blob=np.arange(N), assigned_blob=blob, colour=np.zeros(N, int),
+                         head_frame=head_frame, candidate=np.where(measured, 0, -1), rigid=np.arange(N))
+    f, m = np.nonzero(lost)
+    out = settle_lost_markers(result, f * BLOB_CODE + blob[f, m], gate_mm=3.0)
+    assert len(out.labels) == 2                                   # marker 2 went
+    kept = out.assigned_blob >= 0
+    assert kept[:6, 0].all() and kept[8:, 0].all()                # marker 0's first frames stayed
+    assert not kept[11:20:2, 1].any() and kept[10:21:2, 1].all()  # the wrong pairing went, the marker stayed
+    assert np.isnan(out.points[11:20:2, 1]).all() and not out.conjectured[11:20:2, 1].any()
