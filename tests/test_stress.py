@@ -362,6 +362,16 @@ def test_a_sparse_rig_the_product_cannot_measure_is_refused_not_guessed(tmp_path
     assert not any(tmp_path.iterdir())  # nothing written, nothing half-written
 
 
+def _tracked_stress_clip(name, tmp_path, capsys):
+    """``mirrorcap track`` on the stress clip ``name`` as a user runs it (its rig file, mirrors
+    self-calibrated), scored against its truth (:func:`conftest.scored_take`)."""
+    clip = ROOT / "sample_scenes" / "stress" / name
+    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", clip / "rig.json",
+                           "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
+    assert code == 0, err
+    return scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
+
+
 @pytest.mark.parametrize("name, reported", [("close", 0.96), ("jaw", 0.96)])
 def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path, capsys, name, reported):
     """#18, two held-out clips: close (a face 480 mm from a wide lens, mirrors at 55 deg) and jaw
@@ -380,11 +390,7 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     label and its first label (18 frames) was dropped as lost for good (95.8 %); a marker lost for good
     now stays when its dot is followed into a later label of it and its points lie on that label's
     path (``core.track.late.settle_lost_markers``): 96.1 %."""
-    clip = ROOT / "sample_scenes" / "stress" / name
-    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", clip / "rig.json",
-                           "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
-    assert code == 0, err
-    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
+    s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["seen_reported_fraction"] > reported
     assert s["rms_mm"] < 0.25 and s["max_mm"] < 3.5
@@ -400,11 +406,7 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
     blob in two across its long axis (``ExtractionSettings.split_touching``): fast720 0 switches, no
     split label, 0.23 mm RMS, 14 points over 2 mm (48), 94.9 % reported (94.4 %); dense 26 points over
     2 mm, 97.5 % reported (95.7 %)."""
-    clip = ROOT / "sample_scenes" / "stress" / name
-    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", clip / "rig.json",
-                           "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
-    assert code == 0, err
-    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
+    s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["rms_mm"] < 0.3
     err_mm = s["error_mm"][:, s["ids"] >= 0]
