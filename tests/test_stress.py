@@ -218,6 +218,9 @@ def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hol
     assert s["identity_switches"] == 0 and s["split_markers"] == 0
     assert s["markers_tracked"] >= 135 and s["markers_matched"] == s["markers_tracked"]
     assert s["rms_mm"] < 0.3
+    # stop 32: a marker paired in the first frames, lost by the final pass at frame 14 though its dot
+    # is detected in both views throughout, is followed on (94.3 % -> 95.7 %)
+    assert s["seen_reported_fraction"] > 0.955
 
 
 def test_a_rig_whose_mirrors_share_no_marker_links_their_scales_through_head_motion(tmp_path, capsys):

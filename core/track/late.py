@@ -392,13 +392,17 @@ def merge_labels(result: TrackResult, pairs) -> TrackResult:
 
 def lost_markers(result: TrackResult, s: TrackSettings) -> tuple:
     """The markers lost for good (:func:`.result.earns_place`) -- a wrong direct/mirror pairing
-    whose 3D point stops matching real candidates, or a real marker whose dot a later label picked
-    up: their labels, and their measurements as ``(frame, direct blob)`` codes (frame *
-    :data:`BLOB_CODE` + blob) for :func:`settle_lost_markers`."""
+    whose 3D point stops matching real candidates, or a real marker the final pass lost or whose
+    dot a later label picked up: the labels of those added later (not followed through their gaps,
+    :func:`.singleview.follow_dots_through_gaps` ``passive``), of those paired in the first frames
+    (followed, strictly: ``lost_initial``), and their measurements as ``(frame, direct blob)`` codes
+    (frame * :data:`BLOB_CODE` + blob) for :func:`settle_lost_markers`."""
     measured = result.assigned_blob >= 0
     lost = ~earns_place(measured, s.min_measured_frames, s.min_measured_fraction)
     f, m = np.nonzero(measured & lost[None])
-    return frozenset(np.asarray(result.labels, dtype=object)[lost]), f * BLOB_CODE + result.assigned_blob[f, m]
+    labels = np.asarray(result.labels, dtype=object)
+    initial = result.first_blob >= 0
+    return frozenset(labels[lost & ~initial]), frozenset(labels[lost & initial]), f * BLOB_CODE + result.assigned_blob[f, m]
 
 
 BLOB_CODE = 1 << 20  # frame * BLOB_CODE + blob: one code per (frame, direct blob)
@@ -409,7 +413,8 @@ def settle_lost_markers(result: TrackResult, codes, gate_mm: float) -> TrackResu
     """After the dots were followed through gaps and labels found to be one dot merged
     (:func:`.singleview.follow_dots_through_gaps`): the measurements of markers lost for good
     (``codes``, :func:`lost_markers`) go with their marker when nothing else joined it. Where they
-    joined another label's measurements they stay only if they lie on its path: at the lost
+    joined other measurements -- a later label of the dot, or the marker's own dot followed on --
+    they stay only if they lie on that path: at the lost
     measurements bracketed by the other's within :data:`INTERLEAVE_FRAMES` frames on both sides, the
     median distance (head frame) from the line between those is at most ``gate_mm``. (On jaw a chin
     dot's first 18 frames come back this way; a wrong pairing interleaved with the true marker's

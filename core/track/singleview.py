@@ -378,7 +378,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
 
 
 def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                 settings: TrackSettings, limit: float, per_frame, tried=None, passive=()) -> list:
+                 settings: TrackSettings, limit: float, per_frame, tried=None, passive=(), lost_initial=()) -> list:
     """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
     ends. From the last frame a marker was measured in (and backwards from the next), its direct
     blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
@@ -405,13 +405,18 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     same dot under a second label (a split): it votes ``(this, other)``. Updates ``result`` in
     place, adds the cells measured to ``per_frame``; returns the votes. ``tried``: a set of the
     chain starts tried before (frame, marker, direction), skipped and added to. ``passive``: labels
-    whose gaps are not followed (a chain of another label may still reach them and vote)."""
+    whose gaps are not followed (a chain of another label may still reach them and vote);
+    ``lost_initial``: labels followed once measured in ``min_measured_frames`` (not
+    :data:`SETTLED_FACTOR` times that), their chains never coasting (markers paired in the first
+    frames and lost for good, :func:`.late.lost_markers`)."""
     normals = np.asarray(normals, float)
     ds = np.asarray(ds, float)
     K = len(normals)
     F, N = result.assigned_blob.shape
     measured = result.assigned_blob >= 0
     settled = measured.sum(axis=0) >= SETTLED_FACTOR * settings.min_measured_frames
+    may_coast = settled.copy()  # a lost marker's chain takes only unbroken dots
+    settled |= np.isin(np.asarray(result.labels, dtype=object), list(lost_initial)) & (measured.sum(axis=0) >= settings.min_measured_frames)
     settled &= ~np.isin(np.asarray(result.labels, dtype=object), list(passive))
     votes = []
     if K == 0 or not settled.any():
@@ -522,7 +527,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
             # carry on: a chain measured here from the blobs found (views not found are dropped), one
             # that found nothing coasts on its velocity for up to MAX_COAST frames (a dot merged with a
             # neighbour's or missed for a frame or two), its gate growing with the frames coasted
-            coasting = go & ~ok & (coast < MAX_COAST)
+            coasting = go & ~ok & (coast < MAX_COAST) & may_coast[marker]
             keep = ok | coasting
             if not keep.any():
                 break
@@ -540,7 +545,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
 
 
 def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                             settings: TrackSettings, limit: float, passive=()) -> TrackResult:
+                             settings: TrackSettings, limit: float, passive=(), lost_initial=()) -> TrackResult:
     """Each marker's dots followed into its gaps (:func:`_follow_once`), in :data:`FOLLOW_ROUNDS`
     rounds (a second starts again where a chain stopped -- two chains that reached one blob, a
     chain that coasted out -- and follows the merged markers' new gaps); after each, labels found
@@ -553,7 +558,7 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
     tried = set()
     for _ in range(FOLLOW_ROUNDS):
         votes = _follow_once(result, det, cands, normals, ds, focal_px, settings, limit, per_frame, tried=tried,
-                             passive=passive)
+                             passive=passive, lost_initial=lost_initial)
         measured = result.assigned_blob >= 0
         first = np.argmax(measured, axis=0)
         together = measured_together(measured)

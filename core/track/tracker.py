@@ -262,15 +262,16 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result.stats["markers_added_later"] = np.array([len(markers[1]) - n_initial])
     result.labels = [names[i] if i < len(names) and names[i] else label for i, label in enumerate(result.labels)]
     result = keep_measured(result, s.min_measured_frames)
-    # a marker lost for good (keep_measured) goes, unless its dot is followed into a later label of it
-    passive, lost = lost_markers(result, s)
+    # a marker lost for good (keep_measured) goes, unless its dot is followed on (paired in the first
+    # frames) or into a later label of it, its points on that label's path (settle_lost_markers)
+    passive, lost_initial, lost = lost_markers(result, s)
     result = merge_split_labels(result, s)
     result = merge_along_2d_tracks(result, candidate_tracks(det, cands) if s.follow_2d_tracks else None)
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
         result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit,
-                                          passive=passive)
+                                          passive=passive, lost_initial=lost_initial)
         result = merge_split_labels(result, s)  # the followed dots steady the earlier marker's conjecture
     result = settle_lost_markers(result, lost, s.gate_mm)
     conjecture, expected = _fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
