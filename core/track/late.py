@@ -402,7 +402,8 @@ def lost_markers(result: TrackResult, s: TrackSettings) -> tuple:
     f, m = np.nonzero(measured & lost[None])
     labels = np.asarray(result.labels, dtype=object)
     initial = result.first_blob >= 0
-    return frozenset(labels[lost & ~initial]), frozenset(labels[lost & initial]), f * BLOB_CODE + result.assigned_blob[f, m]
+    codes = f * BLOB_CODE + result.assigned_blob[f, m]
+    return frozenset(labels[lost & ~initial]), frozenset(labels[lost & initial]), codes
 
 
 BLOB_CODE = 1 << 20  # frame * BLOB_CODE + blob: one code per (frame, direct blob)

@@ -378,7 +378,8 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
 
 
 def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, focal_px: float,
-                 settings: TrackSettings, limit: float, per_frame, tried=None, passive=(), lost_initial=()) -> list:
+                 settings: TrackSettings, limit: float, per_frame, tried=None, passive=(),
+                 lost_initial=()) -> list:
     """Before the gaps are conjectured: follow each marker's dots in 2D into its gaps, from both
     ends. From the last frame a marker was measured in (and backwards from the next), its direct
     blob and mirror blob(s) are carried frame by frame at their image velocity (a mirror it has no
@@ -414,10 +415,11 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     K = len(normals)
     F, N = result.assigned_blob.shape
     measured = result.assigned_blob >= 0
-    settled = measured.sum(axis=0) >= SETTLED_FACTOR * settings.min_measured_frames
+    count, labels = measured.sum(axis=0), np.asarray(result.labels, dtype=object)
+    settled = count >= SETTLED_FACTOR * settings.min_measured_frames
     may_coast = settled.copy()  # a lost marker's chain takes only unbroken dots
-    settled |= np.isin(np.asarray(result.labels, dtype=object), list(lost_initial)) & (measured.sum(axis=0) >= settings.min_measured_frames)
-    settled &= ~np.isin(np.asarray(result.labels, dtype=object), list(passive))
+    settled |= np.isin(labels, list(lost_initial)) & (count >= settings.min_measured_frames)
+    settled &= ~np.isin(labels, list(passive))
     votes = []
     if K == 0 or not settled.any():
         return votes
