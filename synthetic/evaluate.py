@@ -92,13 +92,16 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
         raise InputError("fewer than 3 tracked points match the truth: nothing to score")
     ids_image = ids.copy()
     aligned, err, nearest_3d, scale = _align(P, T, ids, ok)
-    for m in np.flatnonzero(ids >= 0):  # step 2's check of each identity in 3D
-        f_m = np.flatnonzero(ok[:, m] & (nearest_3d[:, m] >= 0))
-        if f_m.size == 0:
-            continue
-        k = np.bincount(nearest_3d[f_m, m]).argmax()
+    # step 2's check of each identity in 3D: the majority of the true markers nearest each label
+    f_ok, m_ok = np.nonzero(ok & (nearest_3d >= 0))
+    N = T.shape[1]
+    votes = np.bincount(m_ok * N + nearest_3d[f_ok, m_ok], minlength=M * N).reshape(M, N)
+    nearest_mostly = np.where(votes.any(axis=1), votes.argmax(axis=1), ids)
+    for m in np.flatnonzero((ids >= 0) & (nearest_mostly != ids)):  # a few labels, if any
+        f_m = f_ok[m_ok == m]
+        k = nearest_mostly[m]
         px = np.linalg.norm(camera.project(T[f_m, k]) - camera.project(aligned[f_m, m]), axis=1)
-        if k != ids[m] and np.median(px) <= match_px:  # the image cannot tell the two apart
+        if np.median(px) <= match_px:  # the image cannot tell the two apart
             ids[m] = k
     if np.any(ids != ids_image):
         aligned, err, nearest_3d, scale = _align(P, T, ids, ok)
@@ -108,7 +111,6 @@ def score_take(points, truth, camera: Camera, conjectured=None, match_px: float 
     e = err[ok]
     cj = conj & reported & (ids[None, :] >= 0)
     ce = err[cj]
-    N = T.shape[1]
     labels_per_marker = np.bincount(ids[ids >= 0], minlength=N)
     completeness = {"split_markers": int(np.count_nonzero(labels_per_marker > 1))}
     if seen is not None:

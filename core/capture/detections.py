@@ -66,16 +66,21 @@ def merge_fragments(sums, cls, radius_px: float):
     return merged, group
 
 
+def blob_moments(sums):
+    """Weighted centre ``cx, cy`` and covariance ``sxx, syy, sxy`` of blobs from their per-blob
+    sums (:func:`blob_shape`)."""
+    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
+    w = sums[:, 0]
+    return cx, cy, sums[:, 8] / w - cx * cx, sums[:, 9] / w - cy * cy, sums[:, 10] / w - cx * cy
+
+
 def blob_shape(sums):
     """Centre, axis ratio (weighted covariance; + 1/12, a pixel's own extent, so a
     one-pixel-wide streak has a finite ratio), normalised mean colour and its saturation
     ``1 - 3 min(r, g, b)`` of blobs from their per-blob sums ``(n, >= 11)``: weight, weighted x
     and y, pixel count, intensity, colour R, G, B (any weighting), weighted x^2, y^2, xy
     (:func:`.markers._blob_sums`; :class:`.colordots.ColorDotExtractor` adds columns after these)."""
-    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
-    sxx = sums[:, 8] / sums[:, 0] - cx * cx
-    syy = sums[:, 9] / sums[:, 0] - cy * cy
-    sxy = sums[:, 10] / sums[:, 0] - cx * cy
+    cx, cy, sxx, syy, sxy = blob_moments(sums)
     half_trace, root = 0.5 * (sxx + syy), np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
     elongation = np.sqrt((half_trace + root + 1.0 / 12.0) / (np.maximum(half_trace - root, 0.0) + 1.0 / 12.0))
     rgb = sums[:, 5:8] / np.maximum(sums[:, 5:8].sum(axis=1, keepdims=True), 1e-12)

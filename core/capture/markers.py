@@ -61,7 +61,8 @@ import numpy as np
 
 from ..common.errors import InputError
 from ..common.files import read_json
-from .detections import MAX_DOT_PX, Detections, blob_shape, empty_detections, merge_fragments, typical_dot_diameter_px
+from .detections import (MAX_DOT_PX, Detections, blob_moments, blob_shape, empty_detections, merge_fragments,
+                         typical_dot_diameter_px)
 
 LIGHTS = ("uv", "normal")  # fluorescent markers under black light; coloured dots under ordinary lamps
 
@@ -215,10 +216,7 @@ def _split_across_long_axis(sums, blob, wgt, xs, ys):
     of the pixels' positions along that axis puts the cut. Returns each pixel's piece,
     ``2 * blob + side``. Two touching dots of one colour make such a clump: each piece's centroid
     lies within a tenth of a radius of its dot's centre while the clump's lies half a spacing off."""
-    cx, cy = sums[:, 1] / sums[:, 0], sums[:, 2] / sums[:, 0]
-    sxx = sums[:, 8] / sums[:, 0] - cx * cx
-    syy = sums[:, 9] / sums[:, 0] - cy * cy
-    sxy = sums[:, 10] / sums[:, 0] - cx * cy
+    cx, cy, sxx, syy, sxy = blob_moments(sums)
     angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)            # the long axis
     along = (xs - cx[blob]) * np.cos(angle)[blob] + (ys - cy[blob]) * np.sin(angle)[blob]
     cut = np.zeros(len(sums))
