@@ -61,7 +61,8 @@ contact-sheet: $(STAMP)
 # 2.5 times as fast at 30 frames/s); webcam, held out (640x360, 120 dots of 3.5 mm); fast540 and fast720, held out
 # (expressions 3 and 2.2 times as fast at 30 frames/s; 960x540 with 180 dots of 3 mm, 1280x720 with 240 dots of
 # 2.5 mm); wide576, held out (1024x576, 260 dots of 2.4 mm, mirrors at 44 deg, +-14 deg yaw, expressions twice
-# as fast; its left view boundary runs through dots). About 65 minutes on 2 cores.
+# as fast; its left view boundary runs through dots); lip648, held out (1152x648, 240 dots of 2.3 mm, mirrors at
+# 47 deg, +-16 deg yaw, expressions 2.3 times as fast; rendered after stop 33's detector). About 70 minutes on 2 cores.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -92,6 +93,9 @@ stress-clips: $(STAMP)
 		--no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/wide576 --size 1024 576 --focal 950 --distance 580 \
 		--mirror-deg 44 --markers 260 --marker-mm 2.4 --head-deg 8 14 4 --tempo 2.0 --frames 90 --samples 4 --seed 93 \
+		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/lip648 --size 1152 648 --focal 1050 --distance 620 \
+		--mirror-deg 47 --markers 240 --marker-mm 2.3 --head-deg 9 16 4 --tempo 2.3 --frames 90 --samples 4 --seed 131 \
 		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin

@@ -312,3 +312,47 @@ def test_two_touching_dots_of_one_colour_come_back_as_two():
     assert np.linalg.norm(found - drawn, axis=1).max() < 0.25   # each dot's own pixels' centre
     between = np.c_[whole.x, whole.y][np.abs(whole.x - 102.2) < 3]
     assert np.linalg.norm(between - drawn.mean(axis=0)) < 0.3  # unsplit: the clump's centre, between the dots
+
+
+def test_touching_dots_are_cut_by_their_neighbours_size_and_their_waist():
+    """A mirror's dots image smaller than the direct view's. Two touching mirror dots of two colours
+    (pink and purple, as at a mirror's grazing angle) are under 1.3 times the frame's median blob but
+    over 1.3 times their neighbours' (``local_typical_area``): they come back as two, each at its own
+    centre in its own class, where before they were one purple blob between them. A dot smeared into
+    an ellipse 1.7 times its neighbours' area is as elongated but widest in its middle (no waist):
+    it stays one. Two touching pale blobs (teeth) are cut, and their pale pieces dropped."""
+    img = np.zeros((220, 320, 3), np.uint8)
+    yy, xx = np.mgrid[0:220, 0:320]
+
+    def disc(centre, radius, rgb):
+        img[(xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= radius ** 2] = np.asarray(rgb)[::-1]
+
+    for i in range(14):                                   # the direct view's dots
+        disc((20 + 21 * i, 30), 3, CLASS_RGB[i % 4])
+    for i in np.r_[0:5, 6:9, 10:16]:                      # a mirror's: smaller
+        disc((20 + 16 * i, 150), 2, CLASS_RGB[i % 4])
+    pair = np.array([[98.0, 150.0], [101.6, 151.6]])
+    disc(pair[0], 2, CLASS_RGB[0])
+    disc(pair[1], 2, CLASS_RGB[3])
+    img[((xx - 164) / 4.5) ** 2 + ((yy - 150) / 1.6) ** 2 <= 1] = CLASS_RGB[3][::-1]   # smeared dot
+    for centre in ((150.0, 70.0), (155.6, 70.0)):         # touching pale blobs: teeth
+        disc(centre, 3, (235, 240, 250))
+    img[((xx - 150) / 9) ** 2 + ((yy - 90) / 1.8) ** 2 <= 1] = (250, 240, 235)          # a pale streak
+    found = mk.extract_markers(img, mk.ColorClasses.default())
+    whole = mk.extract_markers(img, mk.ColorClasses.default(), mk.ExtractionSettings(split_touching=False))
+    assert len(whole) == 14 + 14 + 2 and len(found) == 14 + 14 + 3
+    xy = np.c_[found.x, found.y]
+    for centre, cls in ((pair[0], 0), (pair[1], 3), ((164, 150), 3)):
+        i = int(np.argmin(np.linalg.norm(xy - centre, axis=1)))
+        assert np.linalg.norm(xy[i] - centre) < 0.1 and found.color[i] == cls
+    assert not np.any((found.y > 50) & (found.y < 100))  # no piece of the pale blobs
+    i = int(np.argmin(np.linalg.norm(np.c_[whole.x, whole.y] - pair.mean(axis=0), axis=1)))
+    assert np.linalg.norm([whole.x[i] - pair[:, 0].mean(), whole.y[i] - pair[:, 1].mean()]) < 0.6  # uncut: between
+
+
+def test_local_typical_area_is_the_neighbours_median():
+    cx = np.r_[np.arange(10) * 10.0, 1000 + np.arange(10) * 10.0]
+    area = np.r_[np.full(10, 30.0), np.full(10, 12.0)]
+    area[3], area[14] = 60.0, 25.0
+    typical = mk.local_typical_area(cx, np.zeros(20), area)
+    assert np.allclose(typical[:10], 30.0) and np.allclose(typical[10:], 12.0)

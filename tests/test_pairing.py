@@ -71,3 +71,19 @@ def test_single_frames_are_not_enough(rig):
     one = pair_tracks(*args(frames[:1]), rig.camera, MirrorPlane(*rig.planes[0]))
     full = pair_tracks(*args(frames), rig.camera, MirrorPlane(*rig.planes[0]))
     assert len(one.direct_track) == 0 and len(full.direct_track) > 100
+
+
+def test_the_continuing_candidate_is_the_one_on_the_mirror_track_held_longest():
+    """pairing.continuing_candidate: of a frame's candidates on a marker's last direct track, the
+    one sharing the most of its last mirror tracks; tied, the one on the track the marker has held
+    longest (``held``) -- its own pairing, not a newcomer grazing next to its hidden image."""
+    from mirrorcap.core.track.pairing import continuing_candidate
+
+    dtrack = np.array([7, 7, 7, 3])
+    mtrack = np.array([[4, -1], [-1, 9], [4, 9], [4, -1]])   # candidate 2 shares both tracks
+    last_d, last_m = np.array([7, 7]), np.array([[4, 9], [4, 9]])
+    assert continuing_candidate(dtrack, mtrack, last_d, last_m).tolist() == [2, 2]
+    dtrack, mtrack = dtrack[:2], mtrack[:2]                   # one track each: a tie
+    held = np.array([[30, 2], [2, 30]])
+    assert continuing_candidate(dtrack, mtrack, last_d, last_m, held).tolist() == [0, 1]
+    assert continuing_candidate(dtrack, mtrack, np.array([7, 5]), last_m, held).tolist() == [0, -1]

@@ -156,7 +156,9 @@ def test_the_sample_clip_reports_its_seen_markers(tmp_path, capsys):
     """#18's completeness target on the sparse 1280x720 clip, as a user runs `mirrorcap track`: >= 99 %
     of the marker-frames seen in the direct view and a mirror reported (99.4 % measured; 97.5 % before
     dots were followed through gaps and conjectures measured where seen, core.track.singleview), no
-    identity switch, no point over 2 mm."""
+    identity switch, no point over 2 mm. Stop 33: dot 40 took dot 0's image grazing in mirror 1 by
+    its hidden one, 2.9 mm off; a marker now keeps the pairing of the mirror track it has held
+    (``tracker.HELD_FRAMES``) over a nearer pairing of its direct blob: max 1.3 mm."""
     from mirrorcap.core.geometry.camera import Camera
     from mirrorcap.core.take.c3d import read_c3d
     from mirrorcap.synthetic.evaluate import score_take
@@ -211,7 +213,10 @@ def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hol
     assert all(b["crowded"] and b["crowding"] > 1.0 for b in report["view_layout"]["boundaries"])
     assert [b["x"] for b in report["view_layout"]["boundaries"]] == [529, 750]
     assert text.count("runs through dots") == 2
-    assert s["identity_switches"] > 20  # what the user gets from such views: the warnings are earned
+    # what the user gets from such views: the warnings are earned. Stop 32: 45 identity switches, 1.55 mm RMS;
+    # since stop 33 (the touching-dot cut, the held mirror track) no switch, but 97 markers and 42 % of the seen
+    # marker-frames, against 149 and 98 % with the clip's own views
+    assert s["seen_reported_fraction"] < 0.6 and s["markers_tracked"] < 110
     report, text, s, ratio_error = runs["clip"]
     assert report["mirror_agreement"]["consistent"] is True
     assert abs(ratio_error) < 0.001
@@ -219,8 +224,8 @@ def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hol
     assert s["markers_tracked"] >= 135 and s["markers_matched"] == s["markers_tracked"]
     assert s["rms_mm"] < 0.3
     # stop 32: a marker paired in the first frames, lost by the final pass at frame 14 though its dot
-    # is detected in both views throughout, is followed on (94.3 % -> 95.7 %)
-    assert s["seen_reported_fraction"] > 0.955
+    # is detected in both views throughout, is followed on (94.3 % -> 95.7 %); stop 33: 98.4 %
+    assert s["seen_reported_fraction"] > 0.98
 
 
 def test_a_rig_whose_mirrors_share_no_marker_links_their_scales_through_head_motion(tmp_path, capsys):
@@ -400,7 +405,7 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     assert abs(ratio_error) < 0.002
 
 
-@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.945), ("dense", 40, 0.97)])
+@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.97), ("dense", 20, 0.99)])
 def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, reported):
     """#18, stop 32: two touching dots made one blob, centred between them. On fast720 (held out,
     expressions 2.2x as fast) one label sat on such a blob of two dots at the silhouette, 3-4 mm off
@@ -416,3 +421,30 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
     assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
     assert s["seen_reported_fraction"] > reported
     assert abs(ratio_error) < 0.002
+
+
+@pytest.mark.parametrize("held_frames", [5, 10 ** 9])
+def test_a_dot_seen_only_directly_does_not_pair_with_another_dots_grazing_image(tmp_path, capsys, monkeypatch,
+                                                                               held_frames):
+    """#18, stop 33, wide576 (held out: 1024x576, 260 dots of 2.4 mm, mirrors at 44 deg): dot 89, seen
+    only in the direct view, paired with dot 37's image grazing in mirror 1 on the same epipolar line
+    into a point 15 mm off the face, in the frames where dot 37's own marker was measured without that
+    mirror -- 3 identity switches, points 11 mm off, 92.3 % of the seen marker-frames reported. Two
+    defences, each enough against the switches: in the pass, a marker keeps the pairing of the mirror
+    track it has held ``tracker.HELD_FRAMES`` measurements over a nearer pairing of its direct blob;
+    after it, a direct + one-mirror measurement is undone when its mirror blob lies within a pixel of
+    another marker's reflected image on a mirror track that marker measures and the point is off the
+    face (``late.release_other_markers_blobs``: 14 measurements released with the first defence off).
+    Measured: no switch, no split, 0.22 mm RMS, max 2.8 mm, 96.0 % (with the first defence off: no
+    switch either, the same max, but one marker split over two labels)."""
+    from mirrorcap.core.track import tracker
+
+    monkeypatch.setattr(tracker, "HELD_FRAMES", held_frames)
+    s, report, ratio_error = _tracked_stress_clip("wide576", tmp_path, capsys)
+    assert (report["per_frame"]["released_blobs"][0] >= 10) == (held_frames > 5)
+    assert s["identity_switches"] == 0 and s["markers_matched"] == s["markers_tracked"]
+    assert s["rms_mm"] < 0.25 and s["max_mm"] < 3.5
+    assert s["seen_reported_fraction"] > 0.955
+    assert abs(ratio_error) < 0.002
+    if held_frames == 5:   # the product's default
+        assert s["split_markers"] == 0

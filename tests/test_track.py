@@ -328,6 +328,31 @@ def test_labels_on_one_pair_of_2d_tracks_are_one_marker():
     assert _shared_track_pairs(far, dtrack, mtrack) == []
 
 
+def test_a_mirror_track_handover_is_vetoed_where_the_direct_view_follows_the_dot_elsewhere():
+    """merge_along_2d_tracks, rule 2 (a gap the direct view alone lost: the earlier label's last
+    mirror track is the later label's first) and its veto: the dense clip's dot 218 and dot 139,
+    11 mm apart, imaged a pixel apart grazing in a mirror, where one mirror track ran from one to
+    the other. Labels 0 (frames 0-4) and 1 (frames 7-11), on direct tracks 0 and 1 and both on
+    mirror track 0, merge -- unless label 0's direct track has a blob in label 1's first frame
+    (``direct_frames``): the direct view followed the dot on elsewhere, so label 1 is another dot."""
+    from mirrorcap.core.track.late import merge_along_2d_tracks
+
+    F = 12
+    dtrack = np.tile(np.arange(10), F)                     # candidate f * 10 + slot: direct track = slot
+    mtrack = np.c_[np.zeros(10 * F, int), np.full(10 * F, -1)]
+    mtrack[dtrack != 0] = -1
+    mtrack[np.arange(F) * 10 + 1, 0] = 0                   # slot 1 is on mirror track 0 too
+    measured = np.zeros((F, 2), bool)
+    measured[:5, 0] = measured[7:, 1] = True
+    candidate = np.c_[np.arange(F) * 10, np.arange(F) * 10 + 1]
+    take = lambda: _labelled_take(measured, [[0, 0, 600], [4, 0, 600]], candidate)  # noqa: E731
+    assert len(merge_along_2d_tracks(take(), (dtrack, mtrack)).labels) == 1           # rule 2: one dot
+    direct_only_to_4 = np.unique(np.r_[np.arange(5), F + np.arange(F)])                # track 0 ends at frame 4
+    assert len(merge_along_2d_tracks(take(), (dtrack, mtrack), direct_only_to_4).labels) == 1
+    direct_on = np.unique(np.r_[np.arange(F), F + np.arange(F)])                      # track 0 goes on
+    assert len(merge_along_2d_tracks(take(), (dtrack, mtrack), direct_on).labels) == 2
+
+
 def test_a_lost_markers_measurements_stay_only_on_the_path_of_the_label_they_joined():
     """core.track.late.settle_lost_markers: the measurements of markers lost for good (codes of
     (frame, direct blob)) go with a label that holds nothing else; where another label's measurements

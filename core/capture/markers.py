@@ -26,10 +26,16 @@ Per frame, vectorised over pixels and components (no per-marker Python loop):
    late markers that lower a take's completeness: off by default). Both must hold: a marker
    near the face's silhouette is foreshortened into an ellipse but keeps its colour, and a
    pale round blob may be a marker washed out by the lamp. Before the test, a blob of two
-   touching dots -- at least ``CLUMP_AREA`` times the frame's median area and elongated (a
-   foreshortened dot is smaller, not larger) -- is cut in two across its long axis where a
-   weighted 2-means along it puts the cut (``split_touching``): its centroid lies half a dot
-   spacing from either dot, each piece's within a tenth of a radius of its own.
+   touching dots is cut in two across its long axis where a weighted 2-means along it puts the
+   cut (``split_touching``): its centroid lies half a dot spacing from either dot, each piece's
+   within a tenth of a radius of its own. A clump is at least ``TOUCHING_AREA`` times the
+   median area of its ``NEIGHBOUR_BLOBS`` nearest blobs (a mirror's dots image smaller than the
+   direct view's, so the frame's median misses them), elongated (a foreshortened dot is
+   smaller, not larger) and waisted: narrower across the cut than ``TOUCHING_WAIST`` of its
+   narrower piece's middle (one dot smeared or foreshortened into an ellipse is widest in the
+   middle). Pale clumps are cut too -- two touching dots of different colours (pink and purple
+   at a mirror's grazing angle) mix to a pale blob -- and their pieces kept only if saturated,
+   so teeth stay dropped.
 
 OpenCV is used single-threaded by the benchmarks; the extractor reuses its frame
 buffers between frames (:class:`MarkerExtractor`).
@@ -205,8 +211,10 @@ class ExtractionSettings:
             raise InputError(f"light must be one of {', '.join(LIGHTS)}, not {self.light!r}")
 
 
-CLUMP_AREA = 1.8  # a clump of touching dots: at least this many times the frame's median blob area
+CLUMP_AREA = 1.8  # split_clumps: a clump of touching dots has at least this many times the frame's median area
+TOUCHING_AREA = 1.3  # split_touching: at least this many times its neighbours' typical dot (local_typical_area)
 TOUCHING_ELONGATION = 1.6  # ... and this elongated (two equal discs 1.5 radii apart: 1.8; touching: 2.2)
+TOUCHING_WAIST = 0.8  # ... and narrower across the cut than this share of the narrower piece's middle
 TWO_MEANS_ROUNDS = 4  # rounds of the 1-D 2-means along a clump's long axis
 
 
@@ -214,8 +222,11 @@ def _split_across_long_axis(sums, blob, wgt, xs, ys):
     """Each blob of ``blob`` (per pixel: the index of the clump it belongs to, ``(P,)``; ``sums``
     the clumps' own :func:`_blob_sums`) cut in two across its long axis, where a weighted 2-means
     of the pixels' positions along that axis puts the cut. Returns each pixel's piece,
-    ``2 * blob + side``. Two touching dots of one colour make such a clump: each piece's centroid
-    lies within a tenth of a radius of its dot's centre while the clump's lies half a spacing off."""
+    ``2 * blob + side``, and each clump's waist ``(n,)``: the weight of its pixels within half a
+    pixel of the cut over that of the lighter piece's pixels within half a pixel of its own mean.
+    Two touching dots make a clump with a waist well under 1 (each piece's centroid lies within a
+    tenth of a radius of its dot's centre while the clump's lies half a spacing off); one dot
+    foreshortened or smeared into an ellipse is widest at its middle, a waist over 1."""
     cx, cy, sxx, syy, sxy = blob_moments(sums)
     angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)            # the long axis
     along = (xs - cx[blob]) * np.cos(angle)[blob] + (ys - cy[blob]) * np.sin(angle)[blob]
@@ -227,7 +238,24 @@ def _split_across_long_axis(sums, blob, wgt, xs, ys):
         w = np.bincount(piece, wgt, n)
         mean = np.bincount(piece, wgt * along, n) / np.maximum(w, 1e-12)
         cut = 0.5 * (mean[0::2] + mean[1::2])
-    return 2 * blob + (along >= cut[blob])
+    piece = 2 * blob + (along >= cut[blob])
+    across_cut = np.bincount(blob, wgt * (np.abs(along - cut[blob]) < 0.5), len(sums))
+    middle = np.bincount(piece, wgt * (np.abs(along - mean[piece]) < 0.5), n).reshape(-1, 2)
+    return piece, across_cut / np.maximum(middle.min(axis=1), 1e-12)
+
+
+NEIGHBOUR_BLOBS = 9  # the blobs around a blob whose median area is its typical dot's
+
+
+def local_typical_area(cx, cy, area):
+    """Each blob's typical dot area ``(n,)``: the median area of its :data:`NEIGHBOUR_BLOBS` nearest
+    blobs (itself included). A mirror's images lie further from the camera than the direct view's,
+    so a frame's dots differ in size by view; their neighbours' do not."""
+    from scipy.spatial import cKDTree
+
+    k = min(NEIGHBOUR_BLOBS, len(area))
+    _, near = cKDTree(np.c_[cx, cy]).query(np.c_[cx, cy], k=k)
+    return np.median(area[near.reshape(len(area), k)], axis=1)
 
 
 def merge_marker_fragments(sums, cls, settings: ExtractionSettings):
@@ -316,12 +344,13 @@ class MarkerExtractor:
         cx, cy, elongation, rgb, saturation = blob_shape(sums)
         odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
         if s.split_touching and sums.shape[0] >= 10:
-            touching = (sums[:, 3] >= CLUMP_AREA * np.median(sums[:, 3])) & (elongation > TOUCHING_ELONGATION) & ~odd
+            touching = ((sums[:, 3] >= TOUCHING_AREA * local_typical_area(cx, cy, sums[:, 3]))
+                        & (elongation > TOUCHING_ELONGATION))
             if touching.any():
-                sums, cls, pixel_blob = self._split_touching(sums, cls, group, lab, touching, wgt, xs, ys,
-                                                             r, g, b, t)
+                sums, cls, pixel_blob, pale_parent = self._split_touching(sums, cls, group, lab, touching, odd, wgt,
+                                                                          xs, ys, r, g, b, t)
                 cx, cy, elongation, rgb, saturation = blob_shape(sums)
-                odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
+                odd = (saturation < s.pale_saturation) & ((elongation > s.max_elongation) | pale_parent)
         # step 7, the blob test; a failing blob of two touching markers of different colours is
         # split by the class of each pixel (the paper's per-pixel labelling) and its saturated parts kept
         keep = (sums[:, 3] >= s.min_area) & ~odd
@@ -350,17 +379,26 @@ class MarkerExtractor:
                           intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep])
 
 
-    def _split_touching(self, sums, cls, group, lab, touching, wgt, xs, ys, r, g, b, t):
-        """``split_touching``: each blob of ``touching`` (at least :data:`CLUMP_AREA` times the frame's
-        median area, more elongated than :data:`TOUCHING_ELONGATION`, not pale: teeth, glints) is
-        replaced by the two pieces :func:`_split_across_long_axis` cuts it into, each classed by its
-        own mean colour. ``group``: each component's blob, ``lab``: each pixel's component (from 1).
-        Returns the new sums and classes, and a function giving each pixel's new blob (for the
-        per-pixel class split, when asked for: the whole frame's pixels are not touched otherwise)."""
+    def _split_touching(self, sums, cls, group, lab, touching, odd, wgt, xs, ys, r, g, b, t):
+        """``split_touching``: each blob of ``touching`` (at least :data:`TOUCHING_AREA` times its
+        neighbours' typical dot, more elongated than :data:`TOUCHING_ELONGATION`) that
+        :func:`_split_across_long_axis` finds waisted (under :data:`TOUCHING_WAIST`) is replaced by
+        the two pieces it cuts it into, each classed by its own mean colour. A pale clump (``odd``:
+        touching dots of different colours mix to a pale blob, as teeth are) is cut too, and each
+        of its pieces must then be saturated to be kept. ``group``: each component's blob, ``lab``:
+        each pixel's component (from 1). Returns the new sums and classes, a function giving each
+        pixel's new blob (for the per-pixel class split, when asked for: the whole frame's pixels
+        are not touched otherwise) and which new blobs are pieces of a pale clump."""
         pix = np.flatnonzero(touching[group][lab - 1])
         rank = np.cumsum(touching) - 1
-        piece = _split_across_long_axis(sums[touching], rank[group[lab[pix] - 1]], wgt[pix], xs[pix], ys[pix])
-        part = _blob_sums(piece, 2 * int(touching.sum()), wgt[pix], xs[pix], ys[pix], r[pix], g[pix], b[pix], t)
+        piece, waist = _split_across_long_axis(sums[touching], rank[group[lab[pix] - 1]], wgt[pix], xs[pix], ys[pix])
+        cut = np.flatnonzero(touching)[waist < TOUCHING_WAIST]
+        touching = np.zeros_like(touching)
+        touching[cut] = True
+        inside = waist[rank[group[lab[pix] - 1]]] < TOUCHING_WAIST
+        pix, piece = pix[inside], piece[inside]
+        piece = 2 * (np.cumsum(waist < TOUCHING_WAIST) - 1)[piece // 2] + piece % 2
+        part = _blob_sums(piece, 2 * cut.size, wgt[pix], xs[pix], ys[pix], r[pix], g[pix], b[pix], t)
         whole = np.flatnonzero(~touching)
 
         def pixel_blob():
@@ -370,7 +408,9 @@ class MarkerExtractor:
             out[pix] = whole.size + piece
             return out
 
-        return np.r_[sums[whole], part], np.r_[cls[whole], self.colors.classify(part[:, 5:8])], pixel_blob
+        pale_parent = np.r_[np.zeros(whole.size, bool), np.repeat(odd[cut], 2)]
+        return (np.r_[sums[whole], part], np.r_[cls[whole], self.colors.classify(part[:, 5:8])], pixel_blob,
+                pale_parent)
 
 
 def _blob_sums(label, n, wgt, xs, ys, r, g, b, threshold) -> np.ndarray:

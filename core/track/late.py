@@ -238,7 +238,7 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
     """Offline, a marker picked up again later as a new chain (a *split*: one dot, two labels) is
     merged back. Two labels that are never measured in the same frame, whose neutral positions lie
     within :data:`MERGE_SEARCH_MM`, where the earlier one's conjecture at the later one's measured
-    frames (the learned neighbour relations of :func:`_fill_gaps`, eq. 5.8) lies within
+    frames (the learned neighbour relations of :func:`.gapfill.fill_gaps`, eq. 5.8) lies within
     :data:`MERGE_MM` of them (median), and no other label comes within twice that: the later chain's
     measurements become the earlier marker's."""
     measured = result.assigned_blob >= 0
@@ -269,7 +269,7 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
     return merge_labels(result, pairs)
 
 
-def merge_along_2d_tracks(result: TrackResult, tracks) -> TrackResult:
+def merge_along_2d_tracks(result: TrackResult, tracks, direct_frames=None) -> TrackResult:
     """Offline, labels of one dot merged where the 2D tracks say so (:func:`.pairing.track_2d`, per
     view over the clip; ``tracks``: :func:`.pairing.candidate_tracks`, each clip candidate's direct
     track ``(C,)`` and track per mirror ``(C, K)``, -1 none; None: nothing merged). Two labels never
@@ -284,12 +284,15 @@ def merge_along_2d_tracks(result: TrackResult, tracks) -> TrackResult:
        measurement sit on one unbroken 2D track of the same mirror, no label measures that track
        in between, and only one earlier label ends on it. Such a gap is the direct view's alone --
        a lower lip behind the upper one while the mouth moves sideways 8 mm in as many frames,
-       which the neighbour relations cannot follow."""
+       which the neighbour relations cannot follow. Unless the direct view followed the earlier
+       label's dot on to another blob in the later label's first frame (``direct_frames``:
+       :func:`.pairing.direct_track_frames`): grazing in a mirror, two dots 11 mm apart image a
+       pixel or two apart and one mirror track can run from one to the other."""
     cand = result.candidate
     if cand is None or tracks is None or len(tracks[0]) == 0:
         return result
     result = merge_labels(result, _shared_track_pairs(result, *tracks))
-    cand, mirror_track = result.candidate, tracks[1]
+    cand, (direct_track, mirror_track) = result.candidate, tracks
     measured = (result.assigned_blob >= 0) & (cand >= 0)
     F, N = measured.shape
     K = mirror_track.shape[1]
@@ -313,10 +316,24 @@ def merge_along_2d_tracks(result: TrackResult, tracks) -> TrackResult:
                     continue
                 if (track[fa + 1:fb, :, k] == tk).any():           # someone measured the track in between
                     continue
+                if direct_frames is not None and _direct_view_follows_on(direct_track, direct_frames, cand,
+                                                                         a, fa, b, fb, F):
+                    continue
                 found.add(int(a))
         if len(found) == 1:
             pairs.append((found.pop(), int(b)))
     return merge_labels(result, pairs)
+
+
+def _direct_view_follows_on(direct_track, direct_frames, cand, a, fa, b, fb, F) -> bool:
+    """Whether label ``a``'s direct 2D track at its frame ``fa`` has a blob in frame ``fb`` that is
+    not on label ``b``'s direct track there (the dot went on elsewhere; rule 2's veto)."""
+    ta, tb = direct_track[cand[fa, a]], direct_track[cand[fb, b]]
+    if ta < 0 or ta == tb:
+        return False
+    code = np.int64(ta) * F + fb
+    at = np.searchsorted(direct_frames, code)
+    return bool(at < direct_frames.size and direct_frames[at] == code)
 
 
 def _shared_track_pairs(result: TrackResult, direct_track, mirror_track) -> list:
@@ -441,6 +458,11 @@ def settle_lost_markers(result: TrackResult, codes, gate_mm: float) -> TrackResu
             path = (1 - w) * H[lo[inside], label] + w * H[hi[inside], label]
             if np.median(np.linalg.norm(H[own[inside], label] - path, axis=1)) > gate_mm:
                 drop[own, label] = True
+    return keep_measured(drop_measurements(result, drop), 1)
+
+
+def drop_measurements(result: TrackResult, drop) -> TrackResult:
+    """The measurements at ``drop`` ``(F, N)`` undone (in place): gaps for the gap fill."""
     if drop.any():
         result.assigned_blob[drop] = -1
         result.points[drop] = np.nan
@@ -449,4 +471,62 @@ def settle_lost_markers(result: TrackResult, codes, gate_mm: float) -> TrackResu
         result.camera_mask[drop] = 0
         if result.candidate is not None:
             result.candidate[drop] = -1
-    return keep_measured(result, 1)
+    return result
+
+
+EXPLAINED_PX = 1.0  # a mirror blob this near another marker's predicted image in that mirror is that marker's
+OFF_FACE_MM = 10.0  # ... when the point it gave lies this far along its ray off the face (add_late_markers' limit)
+
+
+def release_other_markers_blobs(result: TrackResult, det: ClipDetections, cands: ClipCandidates, normals, ds,
+                                focal_px: float, tracks) -> TrackResult:
+    """A measurement from the direct view and one mirror only is undone when its mirror blob is
+    another marker's: within :data:`EXPLAINED_PX` of that marker's image in the mirror -- its 3D
+    point, measured in the frame from the direct view and the other mirror, reflected in the
+    mirror's plane (eq. 3.9) -- and on a 2D track of that mirror (``tracks``:
+    :func:`.pairing.candidate_tracks`) the other marker measures in other frames. Grazing in a
+    mirror a dot is imaged there, intermittently claimed by its marker; a dot seen only directly,
+    on the same epipolar line, pairs with the image into a point 15 mm off any dot, frame after
+    frame wherever the dot's own marker is measured without that mirror (wide576, 17 frames). The
+    track condition spares a marker whose image merely falls where another marker, hidden in the
+    mirror, would be imaged (on a dense face one mirror blob in seven lies within a pixel of such a
+    point)."""
+    from scipy.spatial import cKDTree
+
+    from ..geometry.mirror import reflect_points
+
+    if result.candidate is None or tracks is None:
+        return result
+    mirror_track = tracks[1]
+    n_tracks = int(mirror_track.max(initial=-1)) + 1
+    span = 4.0 * max(abs(det.norm[0]).max(initial=1.0), 1.0)    # frames laid side by side in one tree
+    drop = np.zeros(result.assigned_blob.shape, bool)
+    measured = (result.assigned_blob >= 0) & (result.candidate >= 0)
+    cand = np.maximum(result.candidate, 0)
+    for k in range(len(normals)):
+        own, other = 1 | (2 << k), 1 | (2 << (1 - k))
+        f, a = np.nonzero(measured & (result.camera_mask == own))
+        g, b = np.nonzero(measured & (result.camera_mask == other) & np.isfinite(result.points[..., 0]))
+        if f.size == 0 or g.size == 0:
+            continue
+        h, c = np.nonzero(measured & (mirror_track[cand, k] >= 0))          # who measures which track
+        claimed = np.unique(c.astype(np.int64) * n_tracks + mirror_track[cand[h, c], k])
+        virtual = reflect_points(result.points[g, b], normals[k], ds[k])
+        predicted = virtual[:, :2] / virtual[:, 2:3]
+        blob = cands.mirror_blob[result.candidate[f, a], k]
+        f, a, blob = f[blob >= 0], a[blob >= 0], blob[blob >= 0]
+        dist, hit = cKDTree(np.c_[predicted[:, 0] + span * g, predicted[:, 1]]).query(
+            np.c_[det.norm[k + 1][blob, 0] + span * f, det.norm[k + 1][blob, 1]],
+            distance_upper_bound=EXPLAINED_PX / focal_px)
+        near = np.isfinite(dist)
+        code = b[hit[near]].astype(np.int64) * n_tracks + mirror_track[result.candidate[f[near], a[near]], k]
+        fs, As = f[near][np.isin(code, claimed)], a[near][np.isin(code, claimed)]
+        for frame, label in zip(fs, As):      # a few per take: is the point off the face as well?
+            rest = np.flatnonzero(measured[frame] & (np.arange(measured.shape[1]) != label))
+            drop[frame, label] = _off_the_face(result.points[frame, rest], result.points[frame, label], OFF_FACE_MM)
+        # and the label's other frames on that mirror track: the same wrong pairing
+        pairing = a.astype(np.int64) * n_tracks + mirror_track[result.candidate[f, a], k]
+        wrong = np.isin(pairing, pairing[drop[f, a]])
+        drop[f[wrong], a[wrong]] = True
+    result.stats["released_blobs"] = np.array([int(drop.sum())])
+    return drop_measurements(result, drop)

@@ -203,10 +203,15 @@ def conjecture_motion(motion, valid, neighbour_idx, neighbour_dist, kc: float = 
 
 
 RELATION_CORRELATION = 0.5  # correlation of the errors of one marker's learned relations (see learned_conjectures)
+#: the prior variance of a learned relation's B about eq. 5.8's identity (learned_conjectures): a relation fitted
+#: over frames where the pair barely moved claimed 0.15 mm where the dense clip's dot 277, in an 18-frame gap of
+#: its first 60 frames, moved 2.2 mm unlike its neighbours (with it: withheld). Over 16 clips, points over 2 mm
+#: 157 -> 143 (dense 11 -> 8, fast540 11 -> 7, mirror45 7 -> 3) for 0-0.1 points of completeness each
+RELATION_PRIOR_VAR = 0.1
 
 
 def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.0, min_frames: int = 10,
-                        block_values: int = 2_000_000, correlation: float = 0.0):
+                        block_values: int = 2_000_000, correlation: float = 0.0, prior_var: float = 0.0):
     """Eq. 5.8 with the neighbour relations learned from the take (offline, whole take known).
 
     Eq. 5.8 assumes a hidden marker moves as its neighbours do (``v_i = v_j``, weighted by
@@ -230,7 +235,9 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
     :data:`RELATION_CORRELATION`: the expression that hides a marker throws its neighbours'
     relations off together, and taken as independent, 12 relations claimed a 0.5 mm error where
     the sample clip's lower lip was 2-6 mm off); NaN and inf where no related neighbour is
-    measured. Markers are done in blocks of about ``block_values``
+    measured. ``prior_var``: the prior variance of B about the identity, added to a relation's
+    prediction variance where the data do not pin B down (0: none; the tracker's gap filling uses
+    :data:`RELATION_PRIOR_VAR`). Markers are done in blocks of about ``block_values``
     numbers, so memory stays bounded on long takes."""
     measured = np.asarray(measured, bool)
     F, N = measured.shape
@@ -267,7 +274,10 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
         # saw (the leverage of regression: d' S^-1 d, d the neighbour's motion off its mean)
         dj = vj - mean_j[:, :, None]                                 # (P, K, F, 3)
         lev = (dj @ np.linalg.inv(s_jj + ridge * _EYE3) * dj) @ _ONES3  # (P, K, F)
-        pred_var = pair_var[..., None] * (1.0 + 1.0 / nn + lev)      # (P, K, F)
+        # ... and where the data do not pin B down (little shared motion), by how far B may lie from
+        # eq. 5.8's identity: the prior's variance per unit of the neighbour's motion off what was
+        # fitted, weighted by the prior's share of the fit (ridge over ridge + S)
+        pred_var = pair_var[..., None] * (1.0 + 1.0 / nn + lev) + prior_var * ridge * lev  # (P, K, F)
         w = np.where(mj & (n >= min_frames)[..., None], 1.0 / pred_var, 0.0)  # (P, K, F)
         total = w.sum(axis=1)                                        # (P, F)
         # sum_k w_k ((v_j - mean_j) B_k + mean_i) = sum_k w_k (dj B_k) + sum_k w_k mean_i
@@ -283,13 +293,14 @@ def learned_conjectures(motion, measured, neighbour_idx, rows, ridge: float = 1.
 
 
 def conjecture_gaps(motion, measured, gaps, neighbour_idx, ridge: float = 1.0, min_frames: int = 10,
-                    correlation: float = 0.0):
+                    correlation: float = 0.0, prior_var: float = 0.0):
     """Motions of the ``gaps`` cells ``(F, N)`` from the learned neighbour relations
     (:func:`learned_conjectures`), corrected to meet the measurements at the ends of each
     gap: the relations' error where the marker is ``measured`` is blended linearly in
     time across the gap (held at an open end) and taken off. Returns ``(motion (F, N, 3),
     sd (F, N))`` -- NaN where the cell is no gap or no related neighbour is measured;
-    ``sd`` is the standard deviation of the relations' estimate (mm)."""
+    ``sd`` is the standard deviation of the relations' estimate (mm); ``correlation``, ``prior_var``: as
+    :func:`learned_conjectures` takes them."""
     measured = np.asarray(measured, bool)
     gaps = np.asarray(gaps, bool)
     F, N = gaps.shape
@@ -300,7 +311,7 @@ def conjecture_gaps(motion, measured, gaps, neighbour_idx, ridge: float = 1.0, m
         return out, sd
     motion = np.asarray(motion, float)
     est, var = learned_conjectures(motion, measured, neighbour_idx, rows, ridge, min_frames,
-                                   correlation=correlation)
+                                   correlation=correlation, prior_var=prior_var)
     anchor = measured[:, rows] & np.isfinite(est[..., 0])
     off = np.where(anchor[..., None], motion[:, rows] - est, 0.0)  # the relations' error where measured
     corr = interpolate_in_time(off, anchor)  # blended across each gap from both ends

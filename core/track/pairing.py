@@ -248,6 +248,7 @@ def candidate_tracks(det: ClipDetections, cands):
     K = cands.mirror_blob.shape[1]
     ids = [np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
            if len(det.xy[v]) else np.zeros(0, int) for v in range(K + 1)]
+    cands.__dict__["_direct_blob_track"] = ids[0]     # direct_track_frames reads it
     dtrack = ids[0][cands.direct] if len(cands.direct) else np.zeros(0, int)
     mtrack = np.full(cands.mirror_blob.shape, -1)
     for k in range(K):
@@ -257,19 +258,31 @@ def candidate_tracks(det: ClipDetections, cands):
     return dtrack, mtrack
 
 
-def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack) -> np.ndarray:
+def direct_track_frames(det: ClipDetections, cands) -> np.ndarray:
+    """Sorted codes ``track * F + frame`` of the frames each direct-view 2D track (the ids of
+    :func:`candidate_tracks`) has a blob in."""
+    candidate_tracks(det, cands)
+    return np.unique(cands.__dict__["_direct_blob_track"].astype(np.int64) * det.n_frames + det.frame[0])
+
+
+def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack, held=None) -> np.ndarray:
     """Per marker, the frame's candidate (index into the frame's candidates; -1: none) whose
     direct blob continues the 2D track of the marker's last measurement *and* whose blob in some
     mirror continues that mirror's track: the same physical dot seen the same way, so the same
-    marker whatever its 3D motion. Several such candidates: the one sharing the most tracks."""
+    marker whatever its 3D motion. Several such candidates: the one sharing the most tracks, then
+    (``held`` ``(N, K)``: for how many measurements running the marker has been on its mirror
+    tracks) the one on the mirror track held longest -- the marker's own pairing, where a
+    newcomer is another dot imaged next to the marker's hidden image."""
     if dtrack.size == 0 or not (last_dtrack >= 0).any():
         return np.full(len(last_dtrack), -1)
     i, c = np.nonzero((dtrack[None, :] == last_dtrack[:, None]) & (last_dtrack[:, None] >= 0))
-    shared = ((mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)).sum(axis=1)
+    on = (mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)
+    shared = on.sum(axis=1)
+    age = (on * held[i]).sum(axis=1) if held is not None else np.zeros(i.size)
     ok = shared > 0
-    i, c, shared = i[ok], c[ok], shared[ok]
+    i, c, shared, age = i[ok], c[ok], shared[ok], age[ok]
     out = np.full(len(last_dtrack), -1)
-    order = np.lexsort((-shared, i))                  # per marker, most shared tracks first
+    order = np.lexsort((-age, -shared, i))            # per marker, most shared tracks, then the oldest
     first = np.r_[True, i[order][1:] != i[order][:-1]]
     out[i[order][first]] = c[order][first]
     return out

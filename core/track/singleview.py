@@ -5,7 +5,7 @@ a mirror blob in the mirrored epipolar band (eq. 5.2-5.3). Where a marker's dot 
 in one view only -- its mirror image hidden by the cheek, merged with a neighbour's, or too
 small to detect -- or where the pass lost a pair it did not trust (fast motion outruns the
 gate), the take holds a conjecture from the neighbours (eq. 5.8, learned relations;
-``tracker._fill_gaps``), or a gap where that conjecture was expected too far off. Once the
+``gapfill.fill_gaps``), or a gap where that conjecture was expected too far off. Once the
 whole take is known, the conjecture predicts where the dot must appear in each view; an
 unclaimed blob of the marker's colour there, unambiguously nearer this marker than any
 other, measures it:
