@@ -247,15 +247,19 @@ def _split_across_long_axis(sums, blob, wgt, xs, ys):
 NEIGHBOUR_BLOBS = 9  # the blobs around a blob whose median area is its typical dot's
 
 
-def local_typical_area(cx, cy, area):
-    """Each blob's typical dot area ``(n,)``: the median area of its :data:`NEIGHBOUR_BLOBS` nearest
-    blobs (itself included). A mirror's images lie further from the camera than the direct view's,
-    so a frame's dots differ in size by view; their neighbours' do not."""
-    from scipy.spatial import cKDTree
-
+def local_typical_area(cx, cy, area, rows=None):
+    """The typical dot area of each blob of ``rows`` (indices; None: every blob): the median area of
+    its :data:`NEIGHBOUR_BLOBS` nearest blobs (itself included). A mirror's images lie further from
+    the camera than the direct view's, so a frame's dots differ in size by view; their neighbours'
+    do not."""
+    rows = np.arange(len(area)) if rows is None else np.asarray(rows, int)
     k = min(NEIGHBOUR_BLOBS, len(area))
-    _, near = cKDTree(np.c_[cx, cy]).query(np.c_[cx, cy], k=k)
-    return np.median(area[near.reshape(len(area), k)], axis=1)
+    if rows.size == 0:
+        return np.zeros(0)
+    # the rows are a frame's few elongated blobs: their distances to every blob, no tree to build
+    d2 = (cx[rows, None] - cx[None]) ** 2 + (cy[rows, None] - cy[None]) ** 2
+    near = np.argpartition(d2, k - 1, axis=1)[:, :k]
+    return np.median(area[near], axis=1)
 
 
 def merge_marker_fragments(sums, cls, settings: ExtractionSettings):
@@ -344,8 +348,9 @@ class MarkerExtractor:
         cx, cy, elongation, rgb, saturation = blob_shape(sums)
         odd = (saturation < s.pale_saturation) & (elongation > s.max_elongation)
         if s.split_touching and sums.shape[0] >= 10:
-            touching = ((sums[:, 3] >= TOUCHING_AREA * local_typical_area(cx, cy, sums[:, 3]))
-                        & (elongation > TOUCHING_ELONGATION))
+            touching = elongation > TOUCHING_ELONGATION     # the few elongated blobs: then their size
+            rows = np.flatnonzero(touching)
+            touching[rows] = sums[rows, 3] >= TOUCHING_AREA * local_typical_area(cx, cy, sums[:, 3], rows)
             if touching.any():
                 sums, cls, pixel_blob, pale_parent = self._split_touching(sums, cls, group, lab, touching, odd, wgt,
                                                                           xs, ys, r, g, b, t)
