@@ -62,7 +62,8 @@ contact-sheet: $(STAMP)
 # (expressions 3 and 2.2 times as fast at 30 frames/s; 960x540 with 180 dots of 3 mm, 1280x720 with 240 dots of
 # 2.5 mm); wide576, held out (1024x576, 260 dots of 2.4 mm, mirrors at 44 deg, +-14 deg yaw, expressions twice
 # as fast; its left view boundary runs through dots); lip648, held out (1152x648, 240 dots of 2.3 mm, mirrors at
-# 47 deg, +-16 deg yaw, expressions 2.3 times as fast; rendered after stop 33's detector). About 70 minutes on 2 cores.
+# 47 deg, +-16 deg yaw, expressions 2.3 times as fast; rendered after stop 33's detector); tilt630, held out (1120x630,
+# 210 dots of 2.6 mm, mirrors at 41 deg, +-13 deg yaw, +-6 deg roll; rendered after stop 33's changes). About 75 minutes.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -96,6 +97,9 @@ stress-clips: $(STAMP)
 		--no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/lip648 --size 1152 648 --focal 1050 --distance 620 \
 		--mirror-deg 47 --markers 240 --marker-mm 2.3 --head-deg 9 16 4 --tempo 2.3 --frames 90 --samples 4 --seed 131 \
+		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/tilt630 --size 1120 630 --focal 1000 --distance 640 \
+		--mirror-deg 41 --markers 210 --marker-mm 2.6 --head-deg 11 13 6 --tempo 1.8 --frames 90 --samples 4 --seed 151 \
 		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
