@@ -237,3 +237,25 @@ def test_gaps_follow_the_neighbours_and_meet_both_ends():
     lin = interpolate_in_time(np.where(measured[..., None], motion, np.nan), measured)
     err_lin = np.linalg.norm(lin[gaps] - truth[gaps], axis=1)
     assert err.max() < 0.15 and err_lin.max() > 2.0  # measured about 0.05 and 4 mm
+
+
+def test_a_relation_fitted_on_little_motion_claims_less_where_its_neighbour_moves_beyond_it():
+    """learned_conjectures' ``prior_var`` (the tracker's gap fill: RELATION_PRIOR_VAR): two markers
+    that barely moved while both were measured (0.05 mm noise) fit a relation with a tiny residual; in
+    a gap where the neighbour moves 2 mm, that relation alone claimed 0.25 mm. With the prior's
+    uncertainty about B counted, the claim grows with the neighbour's motion beyond the fit (here to
+    over 0.5 mm: 3 sigma above the tracker's 2 mm limit), and not where the neighbour stays put."""
+    from mirrorcap.core.track.motion import RELATION_PRIOR_VAR, learned_conjectures
+
+    rng = np.random.default_rng(4)
+    F = 60
+    motion = rng.normal(0.0, 0.05, (F, 2, 3))
+    motion[40:, 1, 0] += np.linspace(0.0, 2.0, 20)            # the neighbour moves in the marker's gap
+    measured = np.ones((F, 2), bool)
+    measured[40:, 0] = False                                   # the marker: a gap from frame 40
+    nidx = np.array([[1], [0]])
+    _, var0 = learned_conjectures(motion, measured, nidx, np.array([0]))
+    _, var1 = learned_conjectures(motion, measured, nidx, np.array([0]), prior_var=RELATION_PRIOR_VAR)
+    sd0, sd1 = np.sqrt(var0[:, 0]), np.sqrt(var1[:, 0])
+    assert sd0[-1] < 0.3 and sd1[-1] > 0.5 and sd1[-1] > 2 * sd0[-1]   # 2 mm beyond the fit
+    assert np.allclose(sd0[:40], sd1[:40], rtol=0.1)                    # within it: about the same

@@ -30,7 +30,9 @@ def fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_ne
        the pass's conjecture there.
     3. Each conjecture's expected error: the standard deviation of its learned estimate
        (the relations' residuals, their errors correlated by
-       :data:`core.track.motion.RELATION_CORRELATION`) grown as a random walk with the frames to the nearest
+       :data:`core.track.motion.RELATION_CORRELATION`, and the prior's uncertainty about each relation
+       where the neighbour moves beyond what it was fitted on, :data:`core.track.motion.RELATION_PRIOR_VAR`)
+       grown as a random walk with the frames to the nearest
        measurement of the marker, ``sd * sqrt(frames)`` (cells of step 2: the take's
        median ``sd``). A conjecture expected to be off by more than ``max_sd_mm`` is
        withheld: the marker is left as a gap there (``stats["withheld"]`` per frame), and so is
