@@ -395,14 +395,15 @@ class MarkerExtractor:
         pixel's new blob (for the per-pixel class split, when asked for: the whole frame's pixels
         are not touched otherwise) and which new blobs are pieces of a pale clump."""
         pix = np.flatnonzero(touching[group][lab - 1])
-        rank = np.cumsum(touching) - 1
-        piece, waist = _split_across_long_axis(sums[touching], rank[group[lab[pix] - 1]], wgt[pix], xs[pix], ys[pix])
-        cut = np.flatnonzero(touching)[waist < TOUCHING_WAIST]
+        clump = (np.cumsum(touching) - 1)[group[lab[pix] - 1]]      # each pixel's clump
+        piece, waist = _split_across_long_axis(sums[touching], clump, wgt[pix], xs[pix], ys[pix])
+        waisted = waist < TOUCHING_WAIST
+        cut = np.flatnonzero(touching)[waisted]
         touching = np.zeros_like(touching)
         touching[cut] = True
-        inside = waist[rank[group[lab[pix] - 1]]] < TOUCHING_WAIST
+        inside = waisted[clump]
         pix, piece = pix[inside], piece[inside]
-        piece = 2 * (np.cumsum(waist < TOUCHING_WAIST) - 1)[piece // 2] + piece % 2
+        piece = 2 * (np.cumsum(waisted) - 1)[piece // 2] + piece % 2  # renumbered over the clumps cut
         part = _blob_sums(piece, 2 * cut.size, wgt[pix], xs[pix], ys[pix], r[pix], g[pix], b[pix], t)
         whole = np.flatnonzero(~touching)
 

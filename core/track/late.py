@@ -499,7 +499,6 @@ def release_other_markers_blobs(result: TrackResult, det: ClipDetections, cands:
         return result
     mirror_track = tracks[1]
     n_tracks = int(mirror_track.max(initial=-1)) + 1
-    span = 4.0 * max(abs(det.norm[0]).max(initial=1.0), 1.0)    # frames laid side by side in one tree
     drop = np.zeros(result.assigned_blob.shape, bool)
     measured = (result.assigned_blob >= 0) & (result.candidate >= 0)
     cand = np.maximum(result.candidate, 0)
@@ -513,19 +512,20 @@ def release_other_markers_blobs(result: TrackResult, det: ClipDetections, cands:
         claimed = np.unique(c.astype(np.int64) * n_tracks + mirror_track[cand[h, c], k])
         virtual = reflect_points(result.points[g, b], normals[k], ds[k])
         predicted = virtual[:, :2] / virtual[:, 2:3]
-        blob = cands.mirror_blob[result.candidate[f, a], k]
+        blob = cands.mirror_blob[cand[f, a], k]
         f, a, blob = f[blob >= 0], a[blob >= 0], blob[blob >= 0]
-        dist, hit = cKDTree(np.c_[predicted[:, 0] + span * g, predicted[:, 1]]).query(
-            np.c_[det.norm[k + 1][blob, 0] + span * f, det.norm[k + 1][blob, 1]],
-            distance_upper_bound=EXPLAINED_PX / focal_px)
-        near = np.isfinite(dist)
-        code = b[hit[near]].astype(np.int64) * n_tracks + mirror_track[result.candidate[f[near], a[near]], k]
-        fs, As = f[near][np.isin(code, claimed)], a[near][np.isin(code, claimed)]
-        for frame, label in zip(fs, As):      # a few per take: is the point off the face as well?
+        seen = det.norm[k + 1][blob]
+        within = EXPLAINED_PX / focal_px
+        dist, hit = cKDTree(_frame_spaced(predicted, g, within, seen)).query(
+            _frame_spaced(seen, f, within, predicted), distance_upper_bound=within)
+        near = np.flatnonzero(np.isfinite(dist))
+        track = mirror_track[cand[f, a], k]                                  # each measurement's mirror track
+        near = near[np.isin(b[hit[near]].astype(np.int64) * n_tracks + track[near], claimed)]
+        for frame, label in zip(f[near], a[near]):      # a few per take: is the point off the face as well?
             rest = np.flatnonzero(measured[frame] & (np.arange(measured.shape[1]) != label))
             drop[frame, label] = _off_the_face(result.points[frame, rest], result.points[frame, label], OFF_FACE_MM)
         # and the label's other frames on that mirror track: the same wrong pairing
-        pairing = a.astype(np.int64) * n_tracks + mirror_track[result.candidate[f, a], k]
+        pairing = a.astype(np.int64) * n_tracks + track
         wrong = np.isin(pairing, pairing[drop[f, a]])
         drop[f[wrong], a[wrong]] = True
     result.stats["released_blobs"] = np.array([int(drop.sum())])

@@ -272,16 +272,15 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     # frames) or into a later label of it, its points on that label's path (settle_lost_markers)
     passive, lost_initial, lost = lost_markers(result, s)
     result = merge_split_labels(result, s)
-    result = merge_along_2d_tracks(result, candidate_tracks(det, cands) if s.follow_2d_tracks else None,
-                                   direct_track_frames(det, cands) if s.follow_2d_tracks else None)
+    tracks = candidate_tracks(det, cands) if s.follow_2d_tracks else None
+    result = merge_along_2d_tracks(result, tracks, direct_track_frames(det, cands) if tracks is not None else None)
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
         result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit,
                                           passive=passive, lost_initial=lost_initial)
         result = merge_split_labels(result, s)  # the followed dots steady the earlier marker's conjecture
-    result = release_other_markers_blobs(result, det, cands, normals, ds, camera.focal_px,
-                                         candidate_tracks(det, cands) if s.follow_2d_tracks else None)
+    result = release_other_markers_blobs(result, det, cands, normals, ds, camera.focal_px, tracks)
     result = settle_lost_markers(result, lost, s.gate_mm)
     conjecture, expected = fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
@@ -432,8 +431,8 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 other = other[(on * held[other]).max(axis=1, initial=0) >= HELD_FRAMES]
                 if other.size:
                     gap = np.linalg.norm(cand_key[cont[other]] - query[other], axis=1)
-                    other, gap = other[gap <= gate_i[other]], gap[gap <= gate_i[other]]
-                    a[other], near[other] = cont[other], gap
+                    inside = gap <= gate_i[other]
+                    a[other[inside]], near[other[inside]] = cont[other[inside]], gap[inside]
                 confirmed = valid & (a == cont)
                 # no candidate in the gate, but one on the marker's own 2D tracks: the same dot, moved
                 # faster than the gate allows (a jaw opening in a frame or two). The direct view's track
