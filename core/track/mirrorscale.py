@@ -36,6 +36,8 @@ WINDOW_FRAMES = 15       # frames per window of 2D tracks (as the tracker's init
 WINDOWS = 4              # windows spread over the clip
 AGREEMENT_LIMIT = 2.0    # a take's mirrors disagree when the typical marker is off by more than 2 expected sd
 MIN_BOTH_MIRROR_SIGHTINGS = 10  # fewer sightings of markers in both mirrors: the scales are linked by head motion
+MIN_BOTH_MIRROR_MARKERS = 3     # ... and fewer markers: one wrongly paired marker would set the ratio (mirror35,
+                                # one marker's 15 sightings: 1.22 where the truth is 1.00), so head motion links them
 MOTION_FRAMES = 300      # head-motion link: the first frames of the clip it reads
 MOTION_MAX_ERROR = 0.005  # ... refused when its standard error exceeds 0.5 % (too little head motion)
 MOTION_MIN_SHARE = 0.005  # ... or when the head's translation between frames is under 0.5 % of its distance
@@ -59,6 +61,11 @@ class BothMirrorSamples:
     @property
     def n_markers(self) -> int:
         return int(np.unique(self.marker).size)
+
+    @property
+    def enough_to_link(self) -> bool:
+        """Enough markers and sightings for :func:`link_mirror_scales` to be robust to a wrong pair."""
+        return len(self.p) >= MIN_BOTH_MIRROR_SIGHTINGS and self.n_markers >= MIN_BOTH_MIRROR_MARKERS
 
 
 def both_mirror_samples(det: ClipDetections, camera: Camera, normals, band_px: float = 1.0,
@@ -130,7 +137,7 @@ def mirror_agreement(samples: BothMirrorSamples, normals, ds, focal_px: float) -
     eq. 5.2) through eq. 3.10-3.11. ``consistent`` is False when the median difference
     exceeds ``AGREEMENT_LIMIT`` times the median expected sd."""
     n = len(samples.p)
-    if n < 10 or not np.isfinite(samples.noise_px):
+    if not samples.enough_to_link or not np.isfinite(samples.noise_px):  # one marker may be a wrong pair
         return {"samples": int(n), "markers": samples.n_markers, "consistent": None,
                 "reason": "too few markers seen in both mirrors to compare them"}
     p, pm = samples.p, samples.pm

@@ -138,10 +138,15 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         cals = [self_calibrate_mirror(first, camera, k) for k in range(2)]
         normals = np.stack([c.plane.normal for c in cals])
         both = both_mirror_samples(det, camera, normals)
-        if len(both.p) >= MIN_BOTH_MIRROR_SIGHTINGS:
+        if both.enough_to_link:
             ds, scale_link = link_mirror_scales(both, normals, [c.plane.d for c in cals])
         else:  # the mirrors see only the sides of the face
-            ds, scale_link = link_mirror_scales_by_motion(det, camera, normals, [c.plane.d for c in cals])
+            try:
+                ds, scale_link = link_mirror_scales_by_motion(det, camera, normals, [c.plane.d for c in cals])
+            except DegenerateError:  # a still head: the few markers in both mirrors are all there is
+                if len(both.p) < MIN_BOTH_MIRROR_SIGHTINGS:
+                    raise
+                ds, scale_link = link_mirror_scales(both, normals, [c.plane.d for c in cals])
         # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
         # levels are in mm, so put the face at its nominal distance: the take is then
         # "relative" units that are close to millimetres (a known length makes them exact).
