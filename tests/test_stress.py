@@ -405,7 +405,7 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     assert abs(ratio_error) < 0.002
 
 
-@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.97), ("dense", 20, 0.99)])
+@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.97), ("dense", 4, 0.99)])
 def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, reported):
     """#18, stop 32: two touching dots made one blob, centred between them. On fast720 (held out,
     expressions 2.2x as fast) one label sat on such a blob of two dots at the silhouette, 3-4 mm off
@@ -413,7 +413,8 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
     two grazing images merged: most of the clip's 103 points over 2 mm. The detector now cuts such a
     blob in two across its long axis (``ExtractionSettings.split_touching``): fast720 0 switches, no
     split label, 0.23 mm RMS, 14 points over 2 mm (48), 94.9 % reported (94.4 %); dense 26 points over
-    2 mm, 97.5 % reported (95.7 %)."""
+    2 mm, 97.5 % reported (95.7 %). Since stop 34 dense's single-mirror measurements that their
+    neighbours disown are conjectured (``gapfill.doubt_outlying_measurements``): 8 -> 2 points over 2 mm."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["rms_mm"] < 0.3

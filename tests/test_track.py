@@ -386,3 +386,36 @@ def test_a_lost_markers_measurements_stay_only_on_the_path_of_the_label_they_joi
     assert kept[:6, 0].all() and kept[8:, 0].all()                # marker 0's first frames stayed
     assert not kept[11:20:2, 1].any() and kept[10:21:2, 1].all()  # the wrong pairing went, the marker stayed
     assert np.isnan(out.points[11:20:2, 1]).all() and not out.conjectured[11:20:2, 1].any()
+
+
+def test_a_single_mirror_measurement_its_neighbours_disown_becomes_a_conjecture():
+    """#18, dense clip: a dot seen directly paired with another dot's grazing mirror image (their images
+    merged) lands 2-3 mm along the direct ray for a frame or a few, a move no neighbour makes. The gap
+    fill's learned relations (eq. 5.8) estimate the marker from its neighbours; a direct + one-mirror
+    measurement more than OUTLIER_SD of the estimate's sd off it is doubted and conjectured, on the
+    neighbours' motion. The same offset through both mirrors stays (their depths check each other); no
+    other cell of the take is doubted, not even of a marker measured with 0.7 mm noise, up to 2 mm off its
+    estimate: its relations' sd, not a fixed limit, sets how far is too far (at 2 sd it fails)."""
+    from mirrorcap.core.track.gapfill import doubt_outlying_measurements, fill_gaps
+
+    rng = np.random.default_rng(5)
+    N, F = 40, 120
+    neutral = rng.uniform(-30, 30, (N, 3)) * [1, 1, 0.2] + [0, 0, 600]
+    gain = 1.0 + 0.5 * (neutral[:, :1] / 30.0)
+    wave = np.sin(np.linspace(0, 3 * np.pi, F))[:, None, None] * np.array([0.0, 3.0, 1.0])
+    truth = neutral[None] + gain[None] * wave                            # (F, N, 3), head still
+    take = _labelled_take(np.ones((F, N), bool), neutral, np.arange(F * N).reshape(F, N))
+    take.points = truth + rng.normal(0, 0.05, truth.shape)
+    take.points[:, 12] += rng.normal(0, 0.7, (F, 3))                    # a noisy marker: judged on its own sd
+    take.camera_mask[:, 5] = 7                                           # marker 5 seen through both mirrors
+    wrong = np.zeros((F, N), bool)
+    wrong[60:63, [5, 7]] = True
+    take.points[wrong] += [0.0, 0.0, 2.5]                                # 2.5 mm along the ray
+    take.head_frame = take.points.copy()
+    take = doubt_outlying_measurements(take, 40.0)
+    doubted = take.assigned_blob < 0
+    assert doubted[60:63, 7].all() and take.conjectured[60:63, 7].all()
+    assert doubted.sum() == 3 and take.stats["doubted"].sum() == 3      # marker 5 kept, nothing else doubted
+    fill_gaps(take, 40.0)
+    assert np.linalg.norm(take.points[60:63, 7] - truth[60:63, 7], axis=1).max() < 0.3
+    assert take.camera_mask[60, 7] == 0 and take.camera_mask[60, 5] == 7

@@ -44,7 +44,7 @@ from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
-from .gapfill import fill_gaps
+from .gapfill import doubt_outlying_measurements, fill_gaps
 from .late import (add_late_markers, lost_markers, merge_along_2d_tracks, merge_split_labels,
                    release_other_markers_blobs, settle_lost_markers)
 from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
@@ -282,6 +282,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         result = merge_split_labels(result, s)  # the followed dots steady the earlier marker's conjecture
     result = release_other_markers_blobs(result, det, cands, normals, ds, camera.focal_px, tracks)
     result = settle_lost_markers(result, lost, s.gate_mm)
+    result = doubt_outlying_measurements(result, s.neighbour_radius_mm)
     conjecture, expected = fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
         measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s, limit)
