@@ -63,7 +63,10 @@ contact-sheet: $(STAMP)
 # 2.5 mm); wide576, held out (1024x576, 260 dots of 2.4 mm, mirrors at 44 deg, +-14 deg yaw, expressions twice
 # as fast; its left view boundary runs through dots); lip648, held out (1152x648, 240 dots of 2.3 mm, mirrors at
 # 47 deg, +-16 deg yaw, expressions 2.3 times as fast; rendered after stop 33's detector); tilt630, held out (1120x630,
-# 210 dots of 2.6 mm, mirrors at 41 deg, +-13 deg yaw, +-6 deg roll; rendered after stop 33's changes). About 75 minutes.
+# 210 dots of 2.6 mm, mirrors at 41 deg, +-13 deg yaw, +-6 deg roll; rendered after stop 33's changes); yaw540 (960x540,
+# 230 dots of 2.4 mm, mirrors at 44 deg, +-12 deg pitch; rendered at the start of stop 34, then used to choose among its
+# variants) and dots720 (1280x720, 260 dots of 2.2 mm, mirrors at 38 deg; rendered once stop 34's changes were chosen,
+# held out). About 80 minutes.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -100,6 +103,12 @@ stress-clips: $(STAMP)
 		--no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/tilt630 --size 1120 630 --focal 1000 --distance 640 \
 		--mirror-deg 41 --markers 210 --marker-mm 2.6 --head-deg 11 13 6 --tempo 1.8 --frames 90 --samples 4 --seed 151 \
+		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/yaw540 --size 960 540 --focal 880 --distance 630 \
+		--mirror-deg 44 --markers 230 --marker-mm 2.4 --head-deg 12 10 5 --tempo 2.0 --frames 90 --samples 4 --seed 171 \
+		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dots720 --size 1280 720 --focal 1150 --distance 660 \
+		--mirror-deg 38 --markers 260 --marker-mm 2.2 --head-deg 10 12 5 --tempo 2.2 --frames 90 --samples 4 --seed 191 \
 		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin

@@ -405,7 +405,7 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     assert abs(ratio_error) < 0.002
 
 
-@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.97), ("dense", 4, 0.99)])
+@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.97), ("dense", 2, 0.99)])
 def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, reported):
     """#18, stop 32: two touching dots made one blob, centred between them. On fast720 (held out,
     expressions 2.2x as fast) one label sat on such a blob of two dots at the silhouette, 3-4 mm off
@@ -414,7 +414,8 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
     blob in two across its long axis (``ExtractionSettings.split_touching``): fast720 0 switches, no
     split label, 0.23 mm RMS, 14 points over 2 mm (48), 94.9 % reported (94.4 %); dense 26 points over
     2 mm, 97.5 % reported (95.7 %). Since stop 34 dense's single-mirror measurements that their
-    neighbours disown are conjectured (``gapfill.doubt_outlying_measurements``): 8 -> 2 points over 2 mm."""
+    neighbours disown are re-paired onto the dot's own image or conjectured
+    (``gapfill.doubt_outlying_measurements``): 8 -> 1 point over 2 mm."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["rms_mm"] < 0.3
@@ -449,3 +450,21 @@ def test_a_dot_seen_only_directly_does_not_pair_with_another_dots_grazing_image(
     assert abs(ratio_error) < 0.002
     if held_frames == 5:   # the product's default
         assert s["split_markers"] == 0
+
+
+@pytest.mark.parametrize("name, reported, over_2mm", [("yaw540", 0.985, 2), ("dots720", 0.985, 40)])
+def test_stop_34s_new_clips(tmp_path, capsys, name, reported, over_2mm):
+    """#18, stop 34: yaw540 (960x540, 230 dots of 2.4 mm, mirrors at 44 deg, +-12 deg pitch; rendered at
+    the stop's start, then used in choosing its variants) and dots720 (1280x720, 260 dots of 2.2 mm,
+    mirrors at 38 deg; rendered once the stop's changes were chosen, tuned on by nothing). Measured: no
+    switch, no split label, 98.9 % and 98.8 % of the seen marker-frames reported; yaw540 no point over
+    2 mm (5 before the re-pairing and doubting of measurements their neighbours disown), dots720 35 (36):
+    on dots720 a dot's grazing mirror image, partly hidden at the face's silhouette, drifts 1.5-3 mm off
+    the dot for twenty frames, too smoothly for its relations to disown it (the failure the README
+    lists as open)."""
+    s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
+    assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
+    assert s["seen_reported_fraction"] > reported
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
+    assert abs(ratio_error) < 0.003

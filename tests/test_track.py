@@ -419,3 +419,45 @@ def test_a_single_mirror_measurement_its_neighbours_disown_becomes_a_conjecture(
     fill_gaps(take, 40.0)
     assert np.linalg.norm(take.points[60:63, 7] - truth[60:63, 7], axis=1).max() < 0.3
     assert take.camera_mask[60, 7] == 0 and take.camera_mask[60, 5] == 7
+
+
+def test_a_measurement_its_neighbours_disown_is_re_paired_onto_its_dots_own_image():
+    """#18, dense clip: dot 268's marker took a mirror blob of two grazing images merged (2.1 mm off)
+    while the dot's own image lay in the band beside it. A direct + one-mirror measurement more than
+    REPAIR_SD of its estimate's sd off the learned relations' estimate moves to the candidate of its
+    direct blob that puts it within half that distance (and REPAIR_SD sd) -- unless another marker
+    takes that candidate's mirror blob in the frame; then it is doubted as before."""
+    from mirrorcap.core.track.candidates import ClipCandidates
+    from mirrorcap.core.track.gapfill import doubt_outlying_measurements
+
+    rng = np.random.default_rng(6)
+    N, F = 40, 120
+    neutral = rng.uniform(-30, 30, (N, 3)) * [1, 1, 0.2] + [0, 0, 600]
+    gain = 1.0 + 0.5 * (neutral[:, :1] / 30.0)
+    wave = np.sin(np.linspace(0, 3 * np.pi, F))[:, None, None] * np.array([0.0, 3.0, 1.0])
+    truth = neutral[None] + gain[None] * wave
+    measured_points = truth + rng.normal(0, 0.05, truth.shape)
+    # candidates: per frame one per marker (direct blob = mirror-0 blob = f * N + m), then marker 7's rival
+    # in frames 60-62: its direct blob with another mirror blob at the true point (frame 62: marker 3's blob)
+    points, direct, mirror, frame = [], [], [], []
+    for f in range(F):
+        points.append(measured_points[f]), direct.append(f * N + np.arange(N)), frame.append(np.full(N, f))
+        mirror.append(np.c_[f * N + np.arange(N), np.full(N, -1)])
+        if 60 <= f <= 62:
+            points.append(measured_points[f, 7:8]), direct.append([f * N + 7]), frame.append([f])
+            mirror.append([[f * N + 3 if f == 62 else F * N + f, -1]])
+    points, direct, frame = np.concatenate(points), np.concatenate(direct), np.concatenate(frame)
+    cands = ClipCandidates(points, direct, np.concatenate(mirror), np.zeros(len(direct)), frame,
+                           np.searchsorted(frame, np.arange(F + 1)))
+    own = np.searchsorted(frame, np.arange(F))[:, None] + np.arange(N)[None]    # (F, N) each marker's candidate
+    take = _labelled_take(np.ones((F, N), bool), neutral, own)
+    take.points = measured_points.copy()
+    take.points[60:63, 7] += [0.0, 0.0, 2.5]                              # the merged image: 2.5 mm along the ray
+    take.head_frame = take.points.copy()
+    take = doubt_outlying_measurements(take, 40.0, cands)
+    assert take.stats["repaired"].sum() == 2 and take.stats["doubted"].sum() == 1
+    assert (take.candidate[60:62, 7] == cands.start[60:62] + N).all()      # the rival candidates
+    assert np.linalg.norm(take.points[60:62, 7] - truth[60:62, 7], axis=1).max() < 0.3
+    assert (take.assigned_blob[60:62, 7] >= 0).all() and not take.conjectured[60:62, 7].any()
+    assert take.assigned_blob[62, 7] < 0 and take.conjectured[62, 7]      # its rival's blob is marker 3's
+    assert take.camera_mask[60, 7] == 3

@@ -31,7 +31,8 @@ where it was first seen, its colour class index, the frames it was seen in and t
 ``[rx, ry, rz, tx, ty, tz]``, radians and output units, eq. 5.4, relative to the first
 frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
 ``conflicts``, ``conjectured``, ``withheld``: conjectures left as gaps, expected off by more than
-the limit; ``doubted``: single-mirror measurements made gaps, :func:`.gapfill.doubt_outlying_measurements`;
+the limit; ``doubted`` and ``repaired``: single-mirror measurements made gaps or re-paired,
+:func:`.gapfill.doubt_outlying_measurements`;
 the tracker's other stages add theirs); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
 tracker stage, ``tracking_frames_per_s``).
 """
