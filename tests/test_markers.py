@@ -194,6 +194,18 @@ def test_view_boundaries_through_dots_are_found():
     regions = rigfile.ViewLayout(regions={"mirror0": (0, 0, 400, 720), "direct": (400, 0, 720, 720),
                                           "mirror1": (720, 0, 1280, 720)})
     assert rigfile.check_view_boundaries(x, regions, frames, 6.0) == cut
+    # the same check from a stream's fixed-size histogram of x (`mirrorcap detect`): the same verdicts and lines
+    hist = rigfile.XHistogram()
+    for chunk in np.array_split(rng.permutation(x), frames):
+        hist.add(chunk)
+    assert len(hist) == x.size and hist.counts.size <= 941 * rigfile.XHistogram.BINS_PER_PX
+    for layout in (rigfile.ViewLayout(boundaries=(320.0, 720.0)), rigfile.ViewLayout(boundaries=(400.0, 720.0))):
+        exact, binned = (rigfile.check_view_boundaries(v, layout, frames, 6.0) for v in (x, hist))
+        assert binned["crowded"] == exact["crowded"]
+        for a, b in zip(exact["boundaries"], binned["boundaries"]):
+            assert b["crowded"] == a["crowded"] and b["emptiest_x"] == pytest.approx(a["emptiest_x"], abs=1.0)
+            assert b["dots_per_frame"] == pytest.approx(a["dots_per_frame"], rel=0.02, abs=0.05)
+            assert b["crowding"] == pytest.approx(a["crowding"], rel=0.05, abs=0.01)
 
 
 def test_clip_frames_move_and_keep_truth(rig):

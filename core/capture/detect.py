@@ -31,7 +31,7 @@ from ..common.log import FrameProgress
 from ..geometry.camera import Camera
 from .detections import MAX_DOT_PX, typical_dot_diameter_px
 from .markers import ColorClasses, ExtractionSettings, marker_extractor
-from .rig import VIEW_NAMES, ViewLayout, check_view_boundaries, split_views_by_gaps
+from .rig import VIEW_NAMES, ViewLayout, XHistogram, check_view_boundaries, split_views_by_gaps
 from .video import VideoSource
 
 DETECTION_COLUMNS = ("frame", "view", "x", "y", "color", "area", "intensity")
@@ -180,7 +180,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
     stream.progress = FrameProgress(stream.total, "detect", progress or None)
     counts = np.zeros(len(VIEW_NAMES) + 1, dtype=np.int64)  # last: outside every view
     t_write = 0.0
-    xs = []                                                 # every detection's x, for the layout check
+    xs = XHistogram()                                       # the detections' x, for the layout check
     fd, tmp = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".tmp", dir=output.parent)
     t_start = time.perf_counter()
     try:
@@ -189,7 +189,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
             for n, det, view in stream:
                 counts[:-1] += np.bincount(view[view >= 0], minlength=len(VIEW_NAMES))
                 counts[-1] += np.count_nonzero(view < 0)
-                xs.append(det.x)
+                xs.add(det.x)
                 ok = view >= 0
                 t0 = time.perf_counter()
                 fh.write(format_detection_rows(n, view[ok], det.x[ok], det.y[ok], det.color[ok], det.area[ok],
@@ -212,7 +212,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
                        "frame_count": source.frame_count, "size": list(source.size)},
             "frames": {"start": start, "end": end_eff, "step": step, "processed": done},
             "layout": layout.to_dict(),
-            "view_layout": check_view_boundaries(np.concatenate(xs), layout, done, stream.dot_px or 0.0),
+            "view_layout": check_view_boundaries(xs, layout, done, stream.dot_px or 0.0),
             "colors": colors.to_dict(),
             "settings": asdict(settings),
             "counts": {**{v: int(c) for v, c in zip(VIEW_NAMES, counts)}, "outside_views": int(counts[-1])},
