@@ -87,3 +87,37 @@ def test_the_continuing_candidate_is_the_one_on_the_mirror_track_held_longest():
     held = np.array([[30, 2], [2, 30]])
     assert continuing_candidate(dtrack, mtrack, last_d, last_m, held).tolist() == [0, 1]
     assert continuing_candidate(dtrack, mtrack, np.array([7, 5]), last_m, held).tolist() == [0, -1]
+
+
+def test_continuing_candidate_matches_the_marker_by_candidate_comparison():
+    """pairing.continuing_candidate joins markers and candidates on sorted direct tracks (the final pass
+    calls it every frame; comparing every marker with every candidate took 0.26 s of a 600-frame take,
+    the join 0.05 s). On random frames it picks what the brute-force comparison picks -- most shared
+    tracks, then the longest-held mirror track, then the first candidate -- and a frame where no
+    candidate continues any marker's tracks gives -1 for all (it used to raise)."""
+    from mirrorcap.core.track.pairing import continuing_candidate
+
+    def brute(dtrack, mtrack, last_dtrack, last_mtrack, held):
+        out = np.full(len(last_dtrack), -1)
+        for i in range(len(last_dtrack)):
+            best = None
+            for c in range(len(dtrack)):
+                if last_dtrack[i] < 0 or dtrack[c] != last_dtrack[i]:
+                    continue
+                on = (mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)
+                key = (-int(on.sum()), -int((on * held[i]).sum()), c)
+                if on.any() and (best is None or key < best):
+                    best = key
+            out[i] = -1 if best is None else best[2]
+        return out
+
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        C, N = int(rng.integers(1, 60)), int(rng.integers(1, 40))
+        dtrack, mtrack = rng.integers(-1, 12, C), rng.integers(-1, 6, (C, 2))
+        last_d, last_m, held = rng.integers(-1, 12, N), rng.integers(-1, 6, (N, 2)), rng.integers(0, 8, (N, 2))
+        assert np.array_equal(continuing_candidate(dtrack, mtrack, last_d, last_m, held),
+                              brute(dtrack, mtrack, last_d, last_m, held))
+    none = continuing_candidate(np.array([5, 6]), np.array([[1, -1], [2, -1]]), np.array([5, 7]),
+                                np.array([[3, -1], [2, -1]]), np.zeros((2, 2), int))
+    assert np.array_equal(none, [-1, -1])

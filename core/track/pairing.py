@@ -275,13 +275,23 @@ def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack, held=None) ->
     newcomer is another dot imaged next to the marker's hidden image."""
     if dtrack.size == 0 or not (last_dtrack >= 0).any():
         return np.full(len(last_dtrack), -1)
-    i, c = np.nonzero((dtrack[None, :] == last_dtrack[:, None]) & (last_dtrack[:, None] >= 0))
+    # the (marker, candidate) pairs on one direct track, markers ascending and candidates ascending within
+    # each (as a marker x candidate comparison would list them), by a join on the sorted tracks
+    by_track = np.argsort(dtrack, kind="stable")
+    sorted_tracks = dtrack[by_track]
+    markers = np.flatnonzero(last_dtrack >= 0)
+    lo = np.searchsorted(sorted_tracks, last_dtrack[markers], "left")
+    count = np.searchsorted(sorted_tracks, last_dtrack[markers], "right") - lo
+    i = np.repeat(markers, count)
+    c = by_track[np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())]
     on = (mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)
     shared = on.sum(axis=1)
     age = (on * held[i]).sum(axis=1) if held is not None else np.zeros(i.size)
     ok = shared > 0
     i, c, shared, age = i[ok], c[ok], shared[ok], age[ok]
     out = np.full(len(last_dtrack), -1)
+    if i.size == 0:                                   # no candidate continues a marker's tracks
+        return out
     order = np.lexsort((-age, -shared, i))            # per marker, most shared tracks, then the oldest
     first = np.r_[True, i[order][1:] != i[order][:-1]]
     out[i[order][first]] = c[order][first]
