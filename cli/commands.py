@@ -164,6 +164,10 @@ def track(args) -> int:
               f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts, "
               f"{np.mean(pf['withheld']):.1f} conjectures withheld; "
               f"tracking {report['timings_s']['tracking_frames_per_s']:.0f} frames/s")
+        repaired, doubted = (int(np.sum(pf.get(key, 0))) for key in ("repaired", "doubted"))
+        if repaired or doubted:
+            print(f"  measurements from one mirror that their neighbours disowned: {repaired} re-paired onto another "
+                  f"mirror image, {doubted} left to the gap fill")
         for text in report["warnings"]:
             print(f"  warning: {text}")
     return 0

@@ -377,6 +377,10 @@ def _tracked_stress_clip(name, tmp_path, capsys):
     code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "--rig", clip / "rig.json",
                            "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
     assert code == 0, err
+    per_frame = json.loads((tmp_path / "take.json").read_text())["per_frame"]
+    repaired, doubted = sum(per_frame["repaired"]), sum(per_frame["doubted"])
+    line = f"disowned: {repaired} re-paired onto another mirror image, {doubted} left to the gap fill"
+    assert (line in out) == bool(repaired or doubted)   # the command says what the gap fill re-paired or doubted
     return scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
 
 
