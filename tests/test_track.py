@@ -461,3 +461,7 @@ def test_a_measurement_its_neighbours_disown_is_re_paired_onto_its_dots_own_imag
     assert (take.assigned_blob[60:62, 7] >= 0).all() and not take.conjectured[60:62, 7].any()
     assert take.assigned_blob[62, 7] < 0 and take.conjectured[62, 7]      # its rival's blob is marker 3's
     assert take.camera_mask[60, 7] == 3
+    both = _labelled_take(np.ones((4, 3), bool), neutral[:3], np.arange(12).reshape(4, 3))
+    both.camera_mask[:] = 7                                              # every measurement through both mirrors
+    both = doubt_outlying_measurements(both, 40.0, cands)
+    assert both.stats["repaired"].tolist() == [0] * 4 and both.stats["doubted"].tolist() == [0] * 4

@@ -47,6 +47,7 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
     measured = result.assigned_blob >= 0
     single = (result.camera_mask == 3) | (result.camera_mask == 5)  # direct and one mirror
     result.stats["doubted"] = np.zeros(measured.shape[0], int)
+    result.stats["repaired"] = np.zeros(measured.shape[0], int)
     rows = np.flatnonzero((measured & single).any(axis=0))
     if rows.size == 0:
         return result
@@ -56,7 +57,6 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
                                         min_frames, correlation=RELATION_CORRELATION, prior_var=RELATION_PRIOR_VAR)
     off = np.linalg.norm(motion[:, rows] - estimate, axis=2)                 # (F, P), NaN where no estimate
     sd = np.sqrt(var)
-    result.stats["repaired"] = np.zeros(measured.shape[0], int)
     if cands is not None:
         with np.errstate(invalid="ignore"):
             f, p = np.nonzero((measured & single)[:, rows] & (off > np.maximum(REPAIR_MIN_MM, REPAIR_SD * sd)))
@@ -92,8 +92,8 @@ def _repair_from_rivals(result: TrackResult, cands, frames, markers, expected_he
         own = result.candidate[f, m]
         if own < 0:
             continue
-        frame = cands.at(f)
-        rival = np.flatnonzero(cands.direct[frame] == cands.direct[own]) + frame.start
+        block = cands.at(f)                                                       # the frame's candidates
+        rival = np.flatnonzero(cands.direct[block] == cands.direct[own]) + block.start
         rival = rival[rival != own]
         taken = result.candidate[f][(result.candidate[f] >= 0) & (np.arange(result.candidate.shape[1]) != m)]
         for k in range(K):
