@@ -135,7 +135,8 @@ def mirror_agreement(samples: BothMirrorSamples, normals, ds, focal_px: float) -
     and mirror 1 (take units), and its expected sd -- the detection noise ``noise_px``
     moved along each mirror's epipolar line (the direction that changes the depth,
     eq. 5.2) through eq. 3.10-3.11. ``consistent`` is False when the median difference
-    exceeds ``AGREEMENT_LIMIT`` times the median expected sd."""
+    exceeds ``AGREEMENT_LIMIT`` times the median expected sd; None (no verdict) with fewer than
+    ``MIN_BOTH_MIRROR_MARKERS`` markers or ``MIN_BOTH_MIRROR_SIGHTINGS`` sightings."""
     n = len(samples.p)
     if not samples.enough_to_link or not np.isfinite(samples.noise_px):  # one marker may be a wrong pair
         return {"samples": int(n), "markers": samples.n_markers, "consistent": None,
