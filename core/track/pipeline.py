@@ -12,7 +12,7 @@ face is put ``face_distance_mm`` (600) from the camera, which makes the units cl
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's distance was put in
 mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
-samples, markers -- or, with no marker in both mirrors, :func:`.mirrorscale.link_mirror_scales_by_motion`,
+samples, markers -- or, with fewer than 3 markers in both mirrors, :func:`.mirrorscale.link_mirror_scales_by_motion`,
 which adds markers_per_mirror; ``source`` says which; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
 the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px,
