@@ -82,11 +82,11 @@ def test_the_continuing_candidate_is_the_one_on_the_mirror_track_held_longest():
     dtrack = np.array([7, 7, 7, 3])
     mtrack = np.array([[4, -1], [-1, 9], [4, 9], [4, -1]])   # candidate 2 shares both tracks
     last_d, last_m = np.array([7, 7]), np.array([[4, 9], [4, 9]])
-    assert continuing_candidate(dtrack, mtrack, last_d, last_m).tolist() == [2, 2]
+    assert continuing_candidate(dtrack, mtrack, last_d, last_m)[0].tolist() == [2, 2]
     dtrack, mtrack = dtrack[:2], mtrack[:2]                   # one track each: a tie
     held = np.array([[30, 2], [2, 30]])
-    assert continuing_candidate(dtrack, mtrack, last_d, last_m, held).tolist() == [0, 1]
-    assert continuing_candidate(dtrack, mtrack, np.array([7, 5]), last_m, held).tolist() == [0, -1]
+    assert continuing_candidate(dtrack, mtrack, last_d, last_m, held)[0].tolist() == [0, 1]
+    assert continuing_candidate(dtrack, mtrack, np.array([7, 5]), last_m, held)[0].tolist() == [0, -1]
 
 
 def test_continuing_candidate_matches_the_marker_by_candidate_comparison():
@@ -116,8 +116,8 @@ def test_continuing_candidate_matches_the_marker_by_candidate_comparison():
         C, N = int(rng.integers(1, 60)), int(rng.integers(1, 40))
         dtrack, mtrack = rng.integers(-1, 12, C), rng.integers(-1, 6, (C, 2))
         last_d, last_m, held = rng.integers(-1, 12, N), rng.integers(-1, 6, (N, 2)), rng.integers(0, 8, (N, 2))
-        assert np.array_equal(continuing_candidate(dtrack, mtrack, last_d, last_m, held),
+        assert np.array_equal(continuing_candidate(dtrack, mtrack, last_d, last_m, held)[0],
                               brute(dtrack, mtrack, last_d, last_m, held))
     none = continuing_candidate(np.array([5, 6]), np.array([[1, -1], [2, -1]]), np.array([5, 7]),
-                                np.array([[3, -1], [2, -1]]), np.zeros((2, 2), int))
+                                np.array([[3, -1], [2, -1]]), np.zeros((2, 2), int))[0]
     assert np.array_equal(none, [-1, -1])

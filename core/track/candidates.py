@@ -23,6 +23,13 @@ class Candidates3D:
     residual_px: np.ndarray  # (C,) largest band distance of its pairs
 
 
+def spans(lo, count) -> np.ndarray:
+    """The indices ``lo[i], ..., lo[i] + count[i] - 1`` of every ``i``, one run after another: the
+    rows of sorted runs found by two binary searches, without a Python loop."""
+    count = np.asarray(count, int)
+    return np.repeat(np.asarray(lo, int) - np.cumsum(count) + count, count) + np.arange(count.sum())
+
+
 def _pencil_key(pts, normal):
     """Which line of the pencil through the mirror's epipole ``u`` (the image of the
     mirror normal) each normalised point lies on: the line ``u x p`` (eq. 5.2) meets a
@@ -75,7 +82,7 @@ def band_pairs(p, p_frame, q, q_frame, normal, focal_px: float, band_px: float):
         hi = np.searchsorted(sorted_q, key_p + half, "right")
         counts = hi - lo
         i = np.repeat(np.arange(len(p)), counts)
-        j = order[np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())]
+        j = order[spans(lo, counts)]
     x, y = p[i, 0], p[i, 1]
     l0, l1, l2 = b - c * y, c * x - a, a * y - b * x  # u x p (eq. 5.2)
     dist = np.abs(l0 * q[j, 0] + l1 * q[j, 1] + l2) * (focal_px / np.hypot(l0, l1))
@@ -90,8 +97,7 @@ def _same_frame_pairs(p_frame, q_frame):
     lo, hi = qs[p_frame], qs[p_frame + 1]
     counts = hi - lo
     i = np.repeat(np.arange(len(p_frame)), counts)
-    j = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-    return i, j
+    return i, spans(lo, counts)
 
 
 @dataclass

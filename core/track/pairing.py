@@ -25,6 +25,7 @@ from ..geometry.camera import Camera
 from ..capture.views import ClipDetections
 from ..geometry.epipolar import lines_of_normalised
 from ..geometry.mirror import MirrorPlane
+from .candidates import spans
 
 
 def track_2d(positions, colors, gate_px: float = 8.0, max_gap: int = 2):
@@ -240,18 +241,26 @@ def partner_blobs(det: ClipDetections, direct_ids, partner, mirror_ids):
     return track, blob
 
 
+def blob_tracks(det: ClipDetections, cands) -> list:
+    """The 2D track (:func:`track_2d`, over the whole clip) of every blob of each view, ``(n_v,)``
+    per view; computed once per clip (kept with the clip's candidates ``cands``, which every
+    caller has)."""
+    if "_blob_tracks" not in cands.__dict__:
+        cands.__dict__["_blob_tracks"] = [
+            np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
+            if len(det.xy[v]) else np.zeros(0, int) for v in range(cands.mirror_blob.shape[1] + 1)]
+    return cands.__dict__["_blob_tracks"]
+
+
 def candidate_tracks(det: ClipDetections, cands):
-    """The 2D track (:func:`track_2d`, per view over the whole clip) of every clip
-    candidate's direct blob ``(C,)`` and mirror blobs ``(C, K)`` (-1: no blob in that mirror)."""
+    """The 2D track (:func:`blob_tracks`) of every clip candidate's direct blob ``(C,)`` and
+    mirror blobs ``(C, K)`` (-1: no blob in that mirror)."""
     if "_tracks" in cands.__dict__:
         return cands.__dict__["_tracks"]
-    K = cands.mirror_blob.shape[1]
-    ids = [np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
-           if len(det.xy[v]) else np.zeros(0, int) for v in range(K + 1)]
-    cands.__dict__["_direct_blob_track"] = ids[0]     # direct_track_frames reads it
+    ids = blob_tracks(det, cands)
     dtrack = ids[0][cands.direct] if len(cands.direct) else np.zeros(0, int)
     mtrack = np.full(cands.mirror_blob.shape, -1)
-    for k in range(K):
+    for k in range(cands.mirror_blob.shape[1]):
         has = cands.mirror_blob[:, k] >= 0
         mtrack[has, k] = ids[k + 1][cands.mirror_blob[has, k]]
     cands.__dict__["_tracks"] = (dtrack, mtrack)      # the final pass and the merge read them
@@ -260,21 +269,23 @@ def candidate_tracks(det: ClipDetections, cands):
 
 def direct_track_frames(det: ClipDetections, cands) -> np.ndarray:
     """Sorted codes ``track * F + frame`` of the frames each direct-view 2D track (the ids of
-    :func:`candidate_tracks`) has a blob in."""
-    candidate_tracks(det, cands)
-    return np.unique(cands.__dict__["_direct_blob_track"].astype(np.int64) * det.n_frames + det.frame[0])
+    :func:`blob_tracks`) has a blob in."""
+    return np.unique(blob_tracks(det, cands)[0].astype(np.int64) * det.n_frames + det.frame[0])
 
 
-def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack, held=None) -> np.ndarray:
+def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack, held=None) -> tuple:
     """Per marker, the frame's candidate (index into the frame's candidates; -1: none) whose
     direct blob continues the 2D track of the marker's last measurement *and* whose blob in some
     mirror continues that mirror's track: the same physical dot seen the same way, so the same
     marker whatever its 3D motion. Several such candidates: the one sharing the most tracks, then
     (``held`` ``(N, K)``: for how many measurements running the marker has been on its mirror
     tracks) the one on the mirror track held longest -- the marker's own pairing, where a
-    newcomer is another dot imaged next to the marker's hidden image."""
+    newcomer is another dot imaged next to the marker's hidden image. Returns the candidates and,
+    per marker, how long it has held the longest-held mirror track its candidate continues (0: none,
+    or no ``held``)."""
+    out, out_held = np.full(len(last_dtrack), -1), np.zeros(len(last_dtrack), int)
     if dtrack.size == 0 or not (last_dtrack >= 0).any():
-        return np.full(len(last_dtrack), -1)
+        return out, out_held
     # the (marker, candidate) pairs on one direct track, markers ascending and candidates ascending within
     # each (as a marker x candidate comparison would list them), by a join on the sorted tracks
     by_track = np.argsort(dtrack, kind="stable")
@@ -283,16 +294,16 @@ def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack, held=None) ->
     lo = np.searchsorted(sorted_tracks, last_dtrack[markers], "left")
     count = np.searchsorted(sorted_tracks, last_dtrack[markers], "right") - lo
     i = np.repeat(markers, count)
-    c = by_track[np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())]
+    c = by_track[spans(lo, count)]
     on = (mtrack[c] == last_mtrack[i]) & (last_mtrack[i] >= 0)
     shared = on.sum(axis=1)
-    age = (on * held[i]).sum(axis=1) if held is not None else np.zeros(i.size)
+    on_held = on * held[i] if held is not None else np.zeros(on.shape, int)
+    age, longest = on_held.sum(axis=1), on_held.max(axis=1, initial=0)
     ok = shared > 0
-    i, c, shared, age = i[ok], c[ok], shared[ok], age[ok]
-    out = np.full(len(last_dtrack), -1)
+    i, c, shared, age, longest = i[ok], c[ok], shared[ok], age[ok], longest[ok]
     if i.size == 0:                                   # no candidate continues a marker's tracks
-        return out
+        return out, out_held
     order = np.lexsort((-age, -shared, i))            # per marker, most shared tracks, then the oldest
-    first = np.r_[True, i[order][1:] != i[order][:-1]]
-    out[i[order][first]] = c[order][first]
-    return out
+    first = order[np.r_[True, i[order][1:] != i[order][:-1]]]
+    out[i[first]], out_held[i[first]] = c[first], longest[first]
+    return out, out_held

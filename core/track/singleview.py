@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from ..capture.views import ClipDetections
 from ..geometry.mirror import points_from_planes, reflect_points
 from ..geometry.rigid import rotation_zyx
+from .candidates import spans
 from .late import measured_together, merge_labels
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings
 
@@ -173,7 +174,7 @@ def _alone_on_its_ray(cands, direct_blob, point, predicted) -> np.ndarray:
     hi = np.searchsorted(cands.direct, direct_blob, "right")
     n = hi - lo
     row = np.repeat(np.arange(direct_blob.size), n)
-    idx = np.repeat(lo - np.cumsum(n) + n, n) + np.arange(n.sum())
+    idx = spans(lo, n)
     other = cands.points[idx]
     own = np.linalg.norm(point - predicted, axis=1)
     elsewhere = np.linalg.norm(other - point[row], axis=1) > RIVAL_MM

@@ -418,7 +418,8 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             a = np.where(valid, j + sl.start, -1)
             confirmed = np.zeros(N, bool)
             if cand_dtrack is not None:
-                cont = continuing_candidate(cand_dtrack[sl], cand_mtrack[sl], last_dtrack, last_mtrack, held)
+                cont, cont_held = continuing_candidate(cand_dtrack[sl], cand_mtrack[sl], last_dtrack, last_mtrack,
+                                                       held)
                 cont = np.where(cont >= 0, cont + sl.start, -1)
                 # two pairings of the direct blob taken, both in the gate: the one on the mirror track
                 # the marker has held for HELD_FRAMES measurements, not the nearer (a dot grazing in a
@@ -428,8 +429,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 # than that earns no such trust
                 other = np.flatnonzero(valid & (cont >= 0) & (cont != a))
                 other = other[cands.direct[cont[other]] == cands.direct[a[other]]]
-                on = (cand_mtrack[cont[other]] == last_mtrack[other]) & (last_mtrack[other] >= 0)
-                other = other[(on * held[other]).max(axis=1, initial=0) >= HELD_FRAMES]
+                other = other[cont_held[other] >= HELD_FRAMES]
                 if other.size:
                     gap = np.linalg.norm(cand_key[cont[other]] - query[other], axis=1)
                     inside = gap <= gate_i[other]
