@@ -224,8 +224,10 @@ def test_views_that_cut_through_the_face_are_flagged_and_the_clips_own_views_hol
     assert s["markers_tracked"] >= 135 and s["markers_matched"] == s["markers_tracked"]
     assert s["rms_mm"] < 0.3
     # stop 32: a marker paired in the first frames, lost by the final pass at frame 14 though its dot
-    # is detected in both views throughout, is followed on (94.3 % -> 95.7 %); stop 33: 98.4 %
-    assert s["seen_reported_fraction"] > 0.98
+    # is detected in both views throughout, is followed on (94.3 % -> 95.7 %); stop 33: 98.4 %; stop 35: a dot at
+    # the face's silhouette, off the plane through its neighbours but on the face as the mirror sees it, is a late
+    # marker (late._off_in_mirrors): 99.1 %
+    assert s["seen_reported_fraction"] > 0.985
 
 
 def test_a_rig_whose_mirrors_share_no_marker_links_their_scales_through_head_motion(tmp_path, capsys):
@@ -454,9 +456,12 @@ def test_a_dot_seen_only_directly_does_not_pair_with_another_dots_grazing_image(
     assert abs(ratio_error) < 0.002
     if held_frames == 5:   # the product's default
         assert s["split_markers"] == 0
+        # stop 35: dots 9 and 155, at the face's silhouette, are late markers where the mirror sees them on the
+        # face (late._off_in_mirrors): 96.0 -> 97.6 %, points over 2 mm 12 -> 8
+        assert s["seen_reported_fraction"] > 0.97
 
 
-@pytest.mark.parametrize("name, reported, over_2mm", [("yaw540", 0.985, 2), ("dots720", 0.985, 40),
+@pytest.mark.parametrize("name, reported, over_2mm", [("yaw540", 0.985, 2), ("dots720", 0.99, 40),
                                                      ("hold648", 0.975, 15)])
 def test_stop_34s_new_clips(tmp_path, capsys, name, reported, over_2mm):
     """#18, stop 34: yaw540 (960x540, 230 dots of 2.4 mm, mirrors at 44 deg, +-12 deg pitch; rendered at
@@ -467,7 +472,9 @@ def test_stop_34s_new_clips(tmp_path, capsys, name, reported, over_2mm):
     on dots720 a dot's grazing mirror image, partly hidden at the face's silhouette, drifts 1.5-3 mm off
     the dot for twenty frames, too smoothly for its relations to disown it (the failure the README
     lists as open). hold648 (1152x648, 250 dots of 2.3 mm, mirrors at 43 deg, +-13 deg yaw; rendered at
-    the start of stop 35, no code changed since): no switch, no split label, 98.0 %, 12 points over 2 mm."""
+    the start of stop 35, before its one change): no switch, no split label, 98.0 %, 12 points over 2 mm.
+    Stop 35: dots720's dot 9, at the face's silhouette, is a late marker where mirror 1 sees it on the face
+    (late._off_in_mirrors): 98.8 -> 99.6 %."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["seen_reported_fraction"] > reported

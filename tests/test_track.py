@@ -388,6 +388,40 @@ def test_a_lost_markers_measurements_stay_only_on_the_path_of_the_label_they_joi
     assert np.isnan(out.points[11:20:2, 1]).all() and not out.conjectured[11:20:2, 1].any()
 
 
+def test_a_dot_at_the_silhouette_is_on_the_face_as_the_mirror_sees_it():
+    """#18, stop 35: a late marker is not added where its point lies off the face -- a direct blob paired
+    with another dot's mirror image lands tens of mm along its ray. The face there is the plane through
+    the markers nearest its ray; a dot at the silhouette (wide576's dots 9 and 155, dots720's dot 9, beyond
+    every tracked marker on the side of the head) lies where that plane, extrapolated, misses the face
+    curving away, 13-31 mm. The mirror sees such a dot face on: reflected in the mirror's plane (eq. 3.9)
+    among the markers measured through that mirror, it lies on the face. A point moved 30-45 mm along
+    the dot's direct ray either way -- a wrong pairing -- is off the face in both views."""
+    from mirrorcap.core.track.late import _off_in_mirrors, _off_the_face
+
+    centre, radius = np.array([0.0, 0.0, 650.0]), 75.0          # a head, its face turned to the camera
+    tilt, turn = np.meshgrid(np.radians(np.arange(0, 64, 8)), np.radians(np.arange(0, 360, 20)))
+    out = np.unique(np.round(np.c_[(np.sin(tilt) * np.cos(turn)).ravel(), (np.sin(tilt) * np.sin(turn)).ravel(),
+                                   -np.cos(tilt).ravel()], 9), axis=0)
+    out = np.vstack([out, [-np.sin(np.radians(75)), 0.0, -np.cos(np.radians(75))]])   # the last: the side dot
+    points = centre + radius * out
+    normal, d = np.array([0.766, 0.0, -0.643]) / np.linalg.norm([0.766, 0.0, -0.643]), -493.8
+    eye = 2.0 * d * normal                                      # the mirror's virtual camera
+    to_eye = eye - points
+    facing = np.einsum("ij,ij->i", to_eye / np.linalg.norm(to_eye, axis=1, keepdims=True), out) > np.cos(np.radians(80))
+    views = 1 | np.where(facing, 2, 0)                          # every marker direct, some through the mirror
+    face, dot = points[:-1], points[-1]
+    planes = (normal[None], np.array([d]))
+    used = np.array([True])
+    assert _off_the_face(face, dot, 10.0)                       # the plane through its neighbours misses it
+    assert not _off_in_mirrors(face, views[:-1], dot, used, planes, 10.0)
+    ray = dot / np.linalg.norm(dot)
+    for step in (-45.0, -30.0, 30.0, 45.0):
+        wrong = dot + step * ray
+        assert _off_the_face(face, wrong, 10.0) and _off_in_mirrors(face, views[:-1], wrong, used, planes, 10.0)
+    # the mirror's face is the markers measured through it: with none, the mirror clears nothing
+    assert _off_in_mirrors(face, np.ones(len(face), int), dot, used, planes, 10.0)
+
+
 def test_a_single_mirror_measurement_its_neighbours_disown_becomes_a_conjecture():
     """#18, dense clip: a dot seen directly paired with another dot's grazing mirror image (their images
     merged) lands 2-3 mm along the direct ray for a frame or a few, a move no neighbour makes. The gap

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..geometry.mirror import reflect_points
 from ..geometry.rigid import rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates
@@ -20,7 +21,7 @@ from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, 
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
                       focal_px: float, link_mm: float = 1.0, link_frames: int = 3, min_frames: int = 5,
                       same_marker_mm: float = 4.0, same_ray_px: float = 2.0, min_support: float = 0.6,
-                      max_rms_factor: float = 2.0, off_face_mm: float = 10.0):
+                      max_rms_factor: float = 2.0, off_face_mm: float = 10.0, planes=None):
     """Markers the initial window missed (hidden at the start, turned into view later).
 
     Candidates the first pass left alone -- their direct blob and their mirror blobs
@@ -37,7 +38,10 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     blob with a better supported chain, nor one off the face: more than ``off_face_mm`` along its
     ray, where it is first seen, from the surface through the markers measured then
     (:func:`_off_the_face`; a direct blob paired with another marker's mirror image lands
-    along its ray, typically ~45 mm away). Chance pairings with false blobs
+    along its ray, typically ~45 mm away) *and*, with the mirrors' ``planes`` ``(normals (K, 3),
+    ds (K,))`` given, off it as each mirror it was paired through sees it (:func:`_off_in_mirrors`):
+    a dot at the face's silhouette lies beyond all its neighbours' rays, where the plane through
+    them misses the face curving away (10-30 mm), but the mirror sees it face on. Chance pairings with false blobs
     are scattered in space and time and do not chain. A marker added gets as its
     neutral position where it was first seen, less its neighbours' motion then
     (:func:`_motion_near`), and is measured from the first frame of its chains on
@@ -125,7 +129,10 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
             continue
         q = entry_of[c]  # where the chain is first seen: off the face as the camera sees it then?
         seen_then = first_pass.points[f[q]][real]
-        if _off_the_face(seen_then[np.all(np.isfinite(seen_then), axis=1)], cands.points[idx[q]], off_face_mm):
+        point, views_then = cands.points[idx[q]], np.where(real, first_pass.camera_mask[f[q]], 0)
+        if _off_the_face(seen_then[np.all(np.isfinite(seen_then), axis=1)], point, off_face_mm) and (
+                planes is None or _off_in_mirrors(first_pass.points[f[q]], views_then, point,
+                                                  cands.mirror_blob[idx[q]] >= 0, planes, off_face_mm)):
             continue
         if keep:
             gap = np.linalg.norm(at_rest[keep] - at_rest[c], axis=1)
@@ -144,7 +151,10 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
             np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
 
 
-def _off_the_face(neutral, point, off_mm: float, k: int = 6) -> bool:
+FACE_MARKERS = 6  # the markers nearest a point's ray that give the face there (_off_the_face)
+
+
+def _off_the_face(neutral, point, off_mm: float, k: int = FACE_MARKERS) -> bool:
     """Is ``point`` more than ``off_mm`` along its ray from the face formed by the markers
     ``neutral`` ``(N, 3)`` (one frame, camera frame: the frame the point is seen in, so the
     face there faces the camera)? The face: the plane ``z = a x' + b y' + c`` (``x' = x/z``,
@@ -162,6 +172,24 @@ def _off_the_face(neutral, point, off_mm: float, k: int = 6) -> bool:
     # where the face curves away (the silhouette) the plane fits its own markers loosely: allow that
     spread = float(np.sqrt(np.mean((A @ coef - neutral[near, 2]) ** 2)))
     return abs(point[2] - z_face) * float(np.sqrt(1.0 + ray @ ray)) > max(off_mm, 4.0 * spread)
+
+
+def _off_in_mirrors(markers, views, point, used, planes, off_mm: float) -> bool:
+    """Is ``point`` off the face (:func:`_off_the_face`) as every mirror it was paired through sees it
+    (``used (K,)``; ``planes`` ``(normals (K, 3), ds (K,))``)? The face in mirror ``k``: the markers
+    ``(N, 3)`` (camera frame, NaN where not measured) measured through it, bit ``2 << k`` of their
+    camera mask ``views (N,)``. A mirror shows the scene as the camera reflected in its plane would
+    (eq. 3.9): reflecting the markers and the point puts that view where :func:`_off_the_face` looks
+    from. A wrong pairing lies on another dot's mirror ray, off the face along it as well. A mirror
+    through which fewer than :func:`_off_the_face`'s ``k`` markers were measured clears nothing."""
+    normals, ds = planes
+    for k in np.flatnonzero(used):
+        face = markers[((views & (2 << k)) > 0) & np.all(np.isfinite(markers), axis=1)]
+        if len(face) >= FACE_MARKERS and not _off_the_face(reflect_points(face, normals[k], ds[k]),
+                                                           reflect_points(point, normals[k], ds[k]), off_mm,
+                                                           FACE_MARKERS):
+            return False
+    return True
 
 
 def _frame_spaced(points, frame, within: float, *extent) -> np.ndarray:

@@ -259,7 +259,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         motion = np.where(np.isfinite(motion), motion, np.inf)
         n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
         given = np.argsort(motion)[:n_rigid]
-    markers = add_late_markers(det, cands, s, markers, first, camera.focal_px)
+    markers = add_late_markers(det, cands, s, markers, first, camera.focal_px, planes=(normals, ds))
     if by_image:  # markers found later may be rigid too
         given = rigid_by_image(camera, markers[1], markers[2], *rigid)
     lap("late_markers")
