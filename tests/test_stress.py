@@ -386,7 +386,7 @@ def _tracked_stress_clip(name, tmp_path, capsys):
     return scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
 
 
-@pytest.mark.parametrize("name, reported", [("close", 0.96), ("jaw", 0.96)])
+@pytest.mark.parametrize("name, reported", [("close", 0.96), ("jaw", 0.967)])
 def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path, capsys, name, reported):
     """#18, two held-out clips: close (a face 480 mm from a wide lens, mirrors at 55 deg) and jaw
     (expressions 2.5 times as fast, 30 frames/s), where chin and lip dots move 3.5-4.6 mm in a frame,
@@ -403,11 +403,29 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     Stop 32: with touching dots cut in two (``split_touching``) a chin dot's later frames went to a new
     label and its first label (18 frames) was dropped as lost for good (95.8 %); a marker lost for good
     now stays when its dot is followed into a later label of it and its points lie on that label's
-    path (``core.track.late.settle_lost_markers``): 96.1 %."""
+    path (``core.track.late.settle_lost_markers``): 96.1 %. Stop 35: a fast dot's gap bracketed by its 2D
+    tracks is measured (``late.bridge_gaps_along_2d_tracks``): jaw 96.5 -> 97.0 %."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["seen_reported_fraction"] > reported
     assert s["rms_mm"] < 0.25 and s["max_mm"] < 3.5
+    assert abs(ratio_error) < 0.002
+
+
+@pytest.mark.parametrize("name, reported, over_2mm, switches", [("fast540", 0.97, 5, 0), ("lip648", 0.978, 2, 0)])
+def test_a_fast_dots_gap_bracketed_by_its_2d_tracks_is_measured(tmp_path, capsys, name, reported, over_2mm, switches):
+    """#18, stop 35: on fast540 (held out, expressions 3x as fast: lips 3-7 mm a frame) eight lower-face
+    markers were lost at one frame and left gaps of 4-12 frames though both views detected their dots;
+    one view's 2D track ran through each gap. Such a gap is measured from the candidates on the marker's
+    own tracks at either end (``late.bridge_gaps_along_2d_tracks``): fast540 96.1 -> 97.2 % of the seen
+    marker-frames reported, points over 2 mm 5 -> 4; lip648 97.9 -> 98.2 %, its two identity switches
+    gone (4 -> 1 point over 2 mm)."""
+    s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
+    assert s["identity_switches"] == switches and s["split_markers"] == 0
+    assert s["seen_reported_fraction"] > reported
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
+    assert sum(report["per_frame"]["bridged"]) > 0
     assert abs(ratio_error) < 0.002
 
 

@@ -422,6 +422,69 @@ def test_a_dot_at_the_silhouette_is_on_the_face_as_the_mirror_sees_it():
     assert _off_in_mirrors(face, np.ones(len(face), int), dot, used, planes, 10.0)
 
 
+def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held_frame=None):
+    """A marker measured in frames 0-2 and 7-9 of 10 on a patch of 25 markers 600 mm away; in every
+    frame slot 0 is its candidate (direct track 5; mirror-0 track 7 to frame 4, then 8: that track
+    breaks), slot 1 another dot's (direct track 6, mirror track 7), slot 2 its direct blob with a
+    stray mirror blob (mirror track 9). Returns the take after :func:`late.bridge_gaps_along_2d_tracks`."""
+    from mirrorcap.core.track.candidates import ClipCandidates
+    from mirrorcap.core.track.late import bridge_gaps_along_2d_tracks
+
+    F, S = 10, 3
+    normal = np.asarray(facing, float) / np.linalg.norm(facing)
+    across = np.cross(normal, [0.0, 1.0, 0.0])
+    grid = np.stack(np.meshgrid(np.arange(-2, 3), np.arange(-2, 3)), axis=-1).reshape(-1, 2) * 8.0
+    neutral = np.array([-40.0, 0.0, 600.0]) + grid[:, :1] * across + grid[:, 1:] * [0.0, 1.0, 0.0]
+    m = 12                                                     # the patch's centre
+    path = neutral[m] + np.arange(F)[:, None] * [0.0, step_mm, 0.0]
+    slot = np.tile(np.arange(S), F)
+    frame = np.repeat(np.arange(F), S)
+    points = path[frame] + np.where(slot[:, None] == 0, 0.0, 20.0) * [1.0, 0.0, 0.0]
+    direct = frame * S + np.where(slot == 2, 0, slot)          # slot 2 shares slot 0's direct blob
+    mirror = np.c_[frame * S + slot, np.full(F * S, -1)]
+    keep = np.ones(F * S, bool)
+    if missing_frame is not None:
+        keep &= ~((frame == missing_frame) & (slot == 0))
+    cands = ClipCandidates(points[keep], direct[keep], mirror[keep], np.zeros(keep.sum()), frame=frame[keep],
+                           start=np.r_[0, np.cumsum(np.bincount(frame[keep], minlength=F))])
+    dtrack = np.where(slot == 1, 6, 5)[keep]
+    mtrack = np.c_[np.where(slot == 0, np.where(frame <= 4, 7, 8), np.where(slot == 1, 7, 9)), np.full(F * S, -1)][keep]
+    measured = np.zeros((F, 25), bool)
+    measured[[0, 1, 2, 7, 8, 9], m] = True
+    index = cands.start[:-1]                                   # each frame's slot-0 candidate (first of it)
+    candidate = np.zeros((F, 25), int)
+    candidate[:, m] = index
+    take = _labelled_take(measured, neutral, candidate)
+    take.assigned_blob[measured] = 0
+    take.points[measured[:, m], m] = path[measured[:, m]]
+    take.head_frame = take.points.copy()
+    if held_frame is not None:                                 # another marker measures slot 0's mirror blob
+        other = 0
+        take.candidate[held_frame, other] = index[held_frame]
+        take.assigned_blob[held_frame, other] = 0
+    planes = (np.array([[0.766, 0.0, -0.643], [-0.766, 0.0, -0.643]]), np.array([-493.8, -493.8]))
+    frame_start = np.arange(F + 1) * S
+    return bridge_gaps_along_2d_tracks(take, cands, (dtrack, mtrack), frame_start, planes), path, m
+
+
+def test_a_fast_dots_gap_is_bridged_where_its_2d_tracks_bracket_it():
+    """#18, stop 35, fast540's lips: a dot moving 3-7 mm a frame outruns the passes' gate and the 2D
+    following's prediction; its mirror track breaks, its direct track runs through. Between two
+    measurements whose direct track (or one mirror's track) is the same, a gap whose every frame has
+    one candidate on the marker's own tracks at either end, its blobs nobody else's, is measured --
+    not a stray mirror blob on the direct track nor another dot's candidate on the mirror track. Not
+    bridged: a frame with no such candidate, a blob another marker measures, a slow dot (the gap is
+    the passes' verdict), a dot the mirror sees at a grazing angle (its image drifts off the dot)."""
+    take, path, m = _bridge_case()
+    gap = np.arange(3, 7)
+    assert (take.assigned_blob[gap, m] >= 0).all() and take.stats["bridged"][gap].tolist() == [1, 1, 1, 1]
+    assert np.allclose(take.points[gap, m], path[gap]) and not take.conjectured[gap, m].any()
+    assert (take.camera_mask[gap, m] == 3).all() and take.assigned_blob[5, m] == 0
+    for case in ({"missing_frame": 5}, {"held_frame": 4}, {"step_mm": 0.3}, {"facing": (0.0, 0.0, -1.0)}):
+        take, path, m = _bridge_case(**case)
+        assert not (take.assigned_blob[3:7, m] >= 0).any() and take.stats["bridged"].sum() == 0, case
+
+
 def test_a_single_mirror_measurement_its_neighbours_disown_becomes_a_conjecture():
     """#18, dense clip: a dot seen directly paired with another dot's grazing mirror image (their images
     merged) lands 2-3 mm along the direct ray for a frame or a few, a move no neighbour makes. The gap

@@ -45,8 +45,8 @@ from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates, clip_candidates
 from .gapfill import doubt_outlying_measurements, fill_gaps
-from .late import (add_late_markers, lost_markers, merge_along_2d_tracks, merge_split_labels,
-                   release_other_markers_blobs, settle_lost_markers)
+from .late import (add_late_markers, bridge_gaps_along_2d_tracks, lost_markers, merge_along_2d_tracks,
+                   merge_split_labels, release_other_markers_blobs, settle_lost_markers)
 from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
 from .motion import (ConstantVelocityKalman, conjecture_motion, conjecture_since_last_seen, false_tracking,
                      neighbours)
@@ -274,6 +274,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = merge_split_labels(result, s)
     tracks = candidate_tracks(det, cands) if s.follow_2d_tracks else None
     result = merge_along_2d_tracks(result, tracks, direct_track_frames(det, cands) if tracks is not None else None)
+    result = bridge_gaps_along_2d_tracks(result, cands, tracks, det.start[0], (normals, ds))
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
