@@ -69,6 +69,22 @@ class ClipDetections:
     def __len__(self) -> int:
         return self.n_frames
 
+    def typical_spacing(self, view: int, focal_px: float | None = None, frames: int = 20) -> float:
+        """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,
+        of any colour, over ``frames`` frames spread over the clip: undistorted (``norm`` times
+        ``focal_px``) when ``focal_px`` is given, else as detected (``xy``). ``inf`` with fewer than 2
+        blobs."""
+        from scipy.spatial import cKDTree
+
+        chosen = np.unique(np.linspace(0, self.n_frames - 1, frames).astype(int))
+        pick = np.isin(self.frame[view], chosen)
+        if pick.sum() < 2:
+            return np.inf
+        xy = self.xy[view][pick] if focal_px is None else self.norm[view][pick] * focal_px
+        points = np.c_[xy, self.frame[view][pick] * 10.0 * (np.ptp(xy) + 1.0)]   # frames far apart: one tree
+        d, _ = cKDTree(points).query(points, k=2)
+        return float(np.median(d[:, 1]))
+
     def head(self, n: int) -> "ClipDetections":
         """The first ``n`` frames (views into the same arrays; blob indices unchanged)."""
         return self.window(0, n)

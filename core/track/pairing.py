@@ -241,13 +241,27 @@ def partner_blobs(det: ClipDetections, direct_ids, partner, mirror_ids):
     return track, blob
 
 
+#: the whole clip's 2D tracks (:func:`blob_tracks`) link a blob this far (a share of the view's typical spacing
+#: between neighbouring blobs), at least :func:`track_2d`'s 8 px: a chin or lip dot moving 10-20 px a frame at
+#: 2-3x tempo broke its tracks at 8 px (jaw, fast720, lip648: 97.0-98.2 % -> 99.0-99.6 % of the seen marker-frames,
+#: no identity switch); the first frames' pairing keeps 8 px (at 12 px yaw540 got 4 points over 2 mm, wide576 16)
+CLIP_LINK_SPACING_SHARE = 0.8
+
+
+def clip_link_gate_px(det: ClipDetections, view: int) -> float:
+    """How far :func:`blob_tracks` links a blob of ``view`` from its prediction: the larger of 8 px
+    and :data:`CLIP_LINK_SPACING_SHARE` of the view's typical blob spacing
+    (:meth:`.ClipDetections.typical_spacing`)."""
+    return max(8.0, CLIP_LINK_SPACING_SHARE * det.typical_spacing(view))
+
+
 def blob_tracks(det: ClipDetections, cands) -> list:
     """The 2D track (:func:`track_2d`, over the whole clip) of every blob of each view, ``(n_v,)``
     per view; computed once per clip (kept with the clip's candidates ``cands``, which every
     caller has)."""
     if "_blob_tracks" not in cands.__dict__:
         cands.__dict__["_blob_tracks"] = [
-            np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"))[0]])
+            np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"), clip_link_gate_px(det, v))[0]])
             if len(det.xy[v]) else np.zeros(0, int) for v in range(cands.mirror_blob.shape[1] + 1)]
     return cands.__dict__["_blob_tracks"]
 

@@ -193,18 +193,6 @@ def _surprise_matches(surprise, ray) -> np.ndarray:
     return np.abs(along) <= DEPTH_RATIO * across + DEPTH_SLACK_MM
 
 
-def _typical_spacing(det: ClipDetections, view: int, focal_px: float, frames: int = 20) -> float:
-    """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,
-    of any colour, over ``frames`` frames spread over the clip."""
-    chosen = np.unique(np.linspace(0, det.n_frames - 1, frames).astype(int))
-    pick = np.isin(det.frame[view], chosen)
-    if pick.sum() < 2:
-        return np.inf
-    xy = _tree_points(det.norm[view][pick], det.frame[view][pick], np.zeros(int(pick.sum())), focal_px)
-    d, _ = cKDTree(xy).query(xy, k=2)
-    return float(np.median(d[:, 1]))
-
-
 def _measured_blobs(result: TrackResult, det: ClipDetections, cands) -> np.ndarray:
     """Each measured cell's blob per view ``(F, N, K + 1)``, global indices (-1: none): the direct
     blob from ``assigned_blob`` (which counts within each frame), the mirror blobs from the clip
@@ -426,7 +414,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
         return votes
     trees = [_blob_tree(det, v, focal_px) for v in range(K + 1)]
     # the search radius in each view: at most SPACING_SHARE of the dots' typical spacing there
-    radius = np.array([min(LINK_PX, SPACING_SHARE * _typical_spacing(det, v, focal_px)) for v in range(K + 1)])
+    radius = np.array([min(LINK_PX, SPACING_SHARE * det.typical_spacing(v, focal_px)) for v in range(K + 1)])
     blobs = _measured_blobs(result, det, cands)
     claimed = _claimed(det, blobs)
     owner = np.full(len(det.frame[0]), -1)             # the label measured from each direct blob
