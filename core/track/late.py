@@ -420,43 +420,45 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, cands: ClipCandidates, trac
     surface = surface_normals(result.neutral)
     centres = 2.0 * np.asarray(planes[1], float)[:, None] * np.asarray(planes[0], float)   # virtual cameras
     cos_limit = np.cos(np.radians(BRIDGE_GRAZING_DEG))
-    for m in np.flatnonzero(measured.sum(axis=0) >= 2):
-        frames = np.flatnonzero(measured[:, m])
-        gap = np.flatnonzero(np.diff(frames) > BRIDGE_MIN_FRAMES)
-        for a, b in zip(frames[gap], frames[gap + 1]):
-            ca, cb = cand[a, m], cand[b, m]
-            da, db, ma, mb = direct_track[ca], direct_track[cb], mirror_track[ca], mirror_track[cb]
-            if da != db and not np.any((ma == mb) & (ma >= 0)):
-                continue                                   # no view's track runs through the gap
-            block = np.arange(cands.start[a + 1], cands.start[b])
-            mt = mirror_track[block]
-            has = mt >= 0
-            ok = np.isin(direct_track[block], [da, db]) & ~claimed[block] & has.any(axis=1)
-            block = block[ok & np.all(~has | (mt == ma) | (mt == mb), axis=1)]
-            f = cands.frame[block]
-            if np.unique(f).size < b - a - 1 or block.size != b - a - 1:
-                continue                                   # a frame with none, or with two
-            if any(h[key[block]][key[block] >= 0].any() for h, key in zip(held, keys)):
-                continue                                   # bridged into another marker's gap already
-            heads = np.einsum("mji,mj->mi", R[f], cands.points[block] - result.head_pose[f, 3:])
-            path = np.vstack([result.head_frame[a, m], heads, result.head_frame[b, m]])
-            if np.linalg.norm(np.diff(path, axis=0), axis=1).max() < BRIDGE_STEP_MM:
-                continue
-            normal = np.einsum("fij,j->fi", R[f], surface[m])
-            seen = cands.mirror_blob[block] >= 0                                         # (n, K)
-            view = centres[None] - cands.points[block][:, None]                          # (n, K, 3)
-            facing = np.einsum("fi,fki->fk", normal, view) >= cos_limit * np.linalg.norm(view, axis=2)
-            if not np.all(facing | ~seen):
-                continue
-            for h, key in zip(held, keys):
-                h[key[block][key[block] >= 0]] = True
-            result.candidate[f, m] = block
-            result.points[f, m] = cands.points[block]
-            result.head_frame[f, m] = heads
-            result.conjectured[f, m] = False
-            result.camera_mask[f, m] = 1 | (seen * (2 << np.arange(K))).sum(axis=1)
-            result.assigned_blob[f, m] = cands.direct[block] - frame_start[f]
-            result.stats["bridged"][f] += 1
+    # every gap of BRIDGE_MIN_FRAMES or more between two measurements, in one pass: (marker, a, b)
+    m_all, f_all = np.nonzero(measured.T)                  # by marker, then frame
+    after = np.flatnonzero((m_all[1:] == m_all[:-1]) & (np.diff(f_all) > BRIDGE_MIN_FRAMES))
+    gm, ga, gb = m_all[after], f_all[after], f_all[after + 1]
+    ca, cb = cand[ga, gm], cand[gb, gm]
+    through = (direct_track[ca] == direct_track[cb]) | np.any((mirror_track[ca] == mirror_track[cb])
+                                                              & (mirror_track[ca] >= 0), axis=1)
+    for m, a, b in zip(gm[through], ga[through], gb[through]):     # a view's track runs through the gap
+        (da, ma), (db, mb) = [(direct_track[c], mirror_track[c]) for c in (cand[a, m], cand[b, m])]
+        block = np.arange(cands.start[a + 1], cands.start[b])
+        mt = mirror_track[block]
+        has = mt >= 0
+        dt = direct_track[block]
+        ok = ((dt == da) | (dt == db)) & ~claimed[block] & has.any(axis=1)
+        block = block[ok & (~has | (mt == ma) | (mt == mb)).all(axis=1)]
+        f = cands.frame[block]                          # sorted: one per frame when every step is one frame
+        if block.size != b - a - 1 or (block.size > 1 and (np.diff(f) != 1).any()):
+            continue                                   # a frame with none, or with two
+        if any(h[key[block]][key[block] >= 0].any() for h, key in zip(held, keys)):
+            continue                                   # bridged into another marker's gap already
+        heads = np.einsum("mji,mj->mi", R[f], cands.points[block] - result.head_pose[f, 3:])
+        path = np.vstack([result.head_frame[a, m], heads, result.head_frame[b, m]])
+        if np.linalg.norm(np.diff(path, axis=0), axis=1).max() < BRIDGE_STEP_MM:
+            continue
+        normal = np.einsum("fij,j->fi", R[f], surface[m])
+        seen = cands.mirror_blob[block] >= 0                                         # (n, K)
+        view = centres[None] - cands.points[block][:, None]                          # (n, K, 3)
+        facing = np.einsum("fi,fki->fk", normal, view) >= cos_limit * np.linalg.norm(view, axis=2)
+        if not np.all(facing | ~seen):
+            continue
+        for h, key in zip(held, keys):
+            h[key[block][key[block] >= 0]] = True
+        result.candidate[f, m] = block
+        result.points[f, m] = cands.points[block]
+        result.head_frame[f, m] = heads
+        result.conjectured[f, m] = False
+        result.camera_mask[f, m] = 1 | (seen * (2 << np.arange(K))).sum(axis=1)
+        result.assigned_blob[f, m] = cands.direct[block] - frame_start[f]
+        result.stats["bridged"][f] += 1
     return result
 
 
