@@ -405,7 +405,7 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     label and its first label (18 frames) was dropped as lost for good (95.8 %); a marker lost for good
     now stays when its dot is followed into a later label of it and its points lie on that label's
     path (``core.track.late.settle_lost_markers``): 96.1 %. Stop 35: a fast dot's gap bracketed by its 2D
-    tracks is measured (``late.bridge_gaps_along_2d_tracks``): jaw 96.5 -> 97.0 %; with the clip's 2D tracks
+    tracks is measured (``bridge.bridge_gaps_along_2d_tracks``): jaw 96.5 -> 97.0 %; with the clip's 2D tracks
     linked within 0.8 of the blob spacing (``pairing.clip_link_gate_px``) its two chin dots hold: 99.0 %."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
@@ -419,7 +419,7 @@ def test_a_fast_dots_gap_bracketed_by_its_2d_tracks_is_measured(tmp_path, capsys
     """#18, stop 35: on fast540 (held out, expressions 3x as fast: lips 3-7 mm a frame) eight lower-face
     markers were lost at one frame and left gaps of 4-12 frames though both views detected their dots;
     one view's 2D track ran through each gap. Such a gap is measured from the candidates on the marker's
-    own tracks at either end (``late.bridge_gaps_along_2d_tracks``): fast540 96.1 -> 97.2 % of the seen
+    own tracks at either end (``bridge.bridge_gaps_along_2d_tracks``): fast540 96.1 -> 97.2 % of the seen
     marker-frames reported, points over 2 mm 5 -> 4; lip648 97.9 -> 98.2 %, its two identity switches
     gone (4 -> 1 point over 2 mm); with the clip's 2D tracks linked within 0.8 of the blob spacing
     (``pairing.clip_link_gate_px``) lip648 99.0 %, fast540 97.3 %."""

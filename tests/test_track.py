@@ -426,9 +426,9 @@ def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held
     """A marker measured in frames 0-2 and 7-9 of 10 on a patch of 25 markers 600 mm away; in every
     frame slot 0 is its candidate (direct track 5; mirror-0 track 7 to frame 4, then 8: that track
     breaks), slot 1 another dot's (direct track 6, mirror track 7), slot 2 its direct blob with a
-    stray mirror blob (mirror track 9). Returns the take after :func:`late.bridge_gaps_along_2d_tracks`."""
+    stray mirror blob (mirror track 9). Returns the take after :func:`bridge.bridge_gaps_along_2d_tracks`."""
     from mirrorcap.core.track.candidates import ClipCandidates
-    from mirrorcap.core.track.late import bridge_gaps_along_2d_tracks
+    from mirrorcap.core.track.bridge import bridge_gaps_along_2d_tracks
 
     F, S = 10, 3
     normal = np.asarray(facing, float) / np.linalg.norm(facing)

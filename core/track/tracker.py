@@ -43,10 +43,11 @@ from ..geometry.camera import Camera
 from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
 from ..capture.views import ClipDetections
+from .bridge import bridge_gaps_along_2d_tracks
 from .candidates import ClipCandidates, clip_candidates
 from .gapfill import doubt_outlying_measurements, fill_gaps
-from .late import (add_late_markers, bridge_gaps_along_2d_tracks, lost_markers, merge_along_2d_tracks,
-                   merge_split_labels, release_other_markers_blobs, settle_lost_markers)
+from .late import (add_late_markers, lost_markers, merge_along_2d_tracks, merge_split_labels,
+                   release_other_markers_blobs, settle_lost_markers)
 from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
 from .motion import (ConstantVelocityKalman, conjecture_motion, conjecture_since_last_seen, false_tracking,
                      neighbours)
