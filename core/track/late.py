@@ -41,8 +41,8 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     along its ray, typically ~45 mm away) *and*, with the mirrors' ``planes`` ``(normals (K, 3),
     ds (K,))`` given, off it as each mirror it was paired through sees it (:func:`_off_in_mirrors`):
     a dot at the face's silhouette lies beyond all its neighbours' rays, where the plane through
-    them misses the face curving away (10-30 mm), but the mirror sees it face on. Chance pairings with false blobs
-    are scattered in space and time and do not chain. A marker added gets as its
+    them misses the face curving away (10-30 mm), but the mirror sees it face on. Chance pairings
+    with false blobs are scattered in space and time and do not chain. A marker added gets as its
     neutral position where it was first seen, less its neighbours' motion then
     (:func:`_motion_near`), and is measured from the first frame of its chains on
     (before, its position is only a conjecture, and a false blob near that would be

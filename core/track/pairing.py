@@ -261,7 +261,8 @@ def blob_tracks(det: ClipDetections, cands) -> list:
     caller has)."""
     if "_blob_tracks" not in cands.__dict__:
         cands.__dict__["_blob_tracks"] = [
-            np.concatenate([np.asarray(i, int) for i in track_2d(det.per_frame(v), det.per_frame(v, "colour"), clip_link_gate_px(det, v))[0]])
+            np.concatenate([np.asarray(i, int) for i in
+                            track_2d(det.per_frame(v), det.per_frame(v, "colour"), clip_link_gate_px(det, v))[0]])
             if len(det.xy[v]) else np.zeros(0, int) for v in range(cands.mirror_blob.shape[1] + 1)]
     return cands.__dict__["_blob_tracks"]
 
