@@ -158,8 +158,9 @@ def track(args) -> int:
         pf = report["per_frame"]
         n = report["frames"]["count"]
         print(f"{report['markers']['count']} markers over {n} frames -> {args.output} [{report['units']}]")
-        followed = np.mean(pf["followed_through_gaps"]) if "followed_through_gaps" in pf else 0.0
-        print(f"  per frame: {np.mean(pf['measured']):.1f} measured ({followed:.1f} of them followed through gaps), "
+        followed, bridged = (np.mean(pf[key]) if key in pf else 0.0 for key in ("followed_through_gaps", "bridged"))
+        print(f"  per frame: {np.mean(pf['measured']):.1f} measured ({followed:.1f} of them followed through gaps, "
+              f"{bridged:.1f} bridged along their 2D tracks), "
               f"{np.mean(pf['conjectured']):.1f} conjectured, "
               f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts, "
               f"{np.mean(pf['withheld']):.1f} conjectures withheld; "

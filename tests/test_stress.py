@@ -384,6 +384,7 @@ def _tracked_stress_clip(name, tmp_path, capsys):
     repaired, doubted = sum(per_frame["repaired"]), sum(per_frame["doubted"])
     line = f"disowned: {repaired} re-paired onto another mirror image, {doubted} left to the gap fill"
     assert (line in out) == bool(repaired or doubted)   # the command says what the gap fill re-paired or doubted
+    assert f"{np.mean(per_frame['bridged']):.1f} bridged along their 2D tracks" in out   # and what the bridge measured
     return scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
 
 
