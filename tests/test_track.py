@@ -427,8 +427,10 @@ def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held
     frame slot 0 is its candidate (direct track 5; mirror-0 track 7 to frame 4, then 8: that track
     breaks), slot 1 another dot's (direct track 6, mirror track 7), slot 2 its direct blob with a
     stray mirror blob (mirror track 9). Returns the take after :func:`bridge.bridge_gaps_along_2d_tracks`."""
-    from mirrorcap.core.track.candidates import ClipCandidates
+    from types import SimpleNamespace
+
     from mirrorcap.core.track.bridge import bridge_gaps_along_2d_tracks
+    from mirrorcap.core.track.candidates import ClipCandidates
 
     F, S = 10, 3
     normal = np.asarray(facing, float) / np.linalg.norm(facing)
@@ -463,8 +465,10 @@ def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held
         take.candidate[held_frame, other] = index[held_frame]
         take.assigned_blob[held_frame, other] = 0
     planes = (np.array([[0.766, 0.0, -0.643], [-0.766, 0.0, -0.643]]), np.array([-493.8, -493.8]))
-    frame_start = np.arange(F + 1) * S
-    return bridge_gaps_along_2d_tracks(take, cands, (dtrack, mtrack), frame_start, planes), path, m
+    # the clip's blobs as the bridge counts them: S direct and S mirror-0 blobs a frame, none in mirror 1
+    det = SimpleNamespace(start=[np.arange(F + 1) * S, np.arange(F + 1) * S, np.zeros(F + 1, int)],
+                          frame=[np.repeat(np.arange(F), S), np.repeat(np.arange(F), S), np.zeros(0, int)])
+    return bridge_gaps_along_2d_tracks(take, det, cands, (dtrack, mtrack), planes), path, m
 
 
 def test_a_fast_dots_gap_is_bridged_where_its_2d_tracks_bracket_it():

@@ -7,8 +7,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.rigid import rotation_zyx
+from ..capture.views import ClipDetections
 from .candidates import ClipCandidates
 from .result import TrackResult
+from .singleview import claimed_blobs, measured_blobs
 
 #: a gap is bridged only where the dot moves at least this far in one frame of it (a slow dot's gap is the
 #: passes' verdict on its blobs, not an expression outrunning them: the light clip got 3 points over 2 mm)
@@ -41,7 +43,7 @@ def surface_normals(points, neighbours_k: int = 9) -> np.ndarray:
     return normals
 
 
-def bridge_gaps_along_2d_tracks(result: TrackResult, cands: ClipCandidates, tracks, frame_start,
+def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands: ClipCandidates, tracks,
                                 planes) -> TrackResult:
     """Offline, a marker's gap measured where the 2D tracks bracket it (:func:`.pairing.track_2d`;
     ``tracks``: :func:`.pairing.candidate_tracks`). A fast lip (fast540: 3-7 mm a frame, its velocity
@@ -56,9 +58,9 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, cands: ClipCandidates, trac
     moves :data:`BRIDGE_STEP_MM` or more in a frame of it, and each mirror it is seen through sees
     it within :data:`BRIDGE_GRAZING_DEG` of its surface normal (:func:`surface_normals` of the neutral
     face turned with the head pose, against the direction to the mirror's virtual camera, the camera
-    centre reflected in the plane: eq. 3.9). ``frame_start``: the direct view's frame offsets
-    (``ClipDetections.start[0]``); ``planes``: the mirrors' ``(normals (K, 3), ds (K,))``. In place;
-    ``stats["bridged"]`` counts the cells per frame."""
+    centre reflected in the plane: eq. 3.9). ``det``: the clip's detections (:class:`.ClipDetections`);
+    ``planes``: the mirrors' ``(normals (K, 3), ds (K,))``. In place; ``stats["bridged"]`` counts the
+    cells per frame."""
     cand = result.candidate
     F, N = result.assigned_blob.shape
     result.stats["bridged"] = np.zeros(F, int)
@@ -67,12 +69,17 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, cands: ClipCandidates, trac
     direct_track, mirror_track = tracks
     K = mirror_track.shape[1]
     measured = (result.assigned_blob >= 0) & (cand >= 0)
+    held = claimed_blobs(det, measured_blobs(result, det, cands))          # per view: the blobs markers measure
     keys = [cands.direct] + [cands.mirror_blob[:, k] for k in range(K)]
-    held = [np.zeros(int(key.max()) + 2 if key.size else 1, bool) for key in keys]   # blobs a marker measures
-    for h, key in zip(held, keys):
-        b = key[cand[measured]]
-        h[b[b >= 0]] = True
-    claimed = np.any([h[key] & (key >= 0) for h, key in zip(held, keys)], axis=0)
+
+    def holds(rows):                               # the candidates ``rows`` with a blob some marker measures
+        out = np.zeros(len(rows), bool)
+        for h, key in zip(held, keys):
+            blob = key[rows]
+            out[blob >= 0] |= h[blob[blob >= 0]]
+        return out
+
+    claimed = holds(np.arange(len(cands.direct)))
     R = rotation_zyx(result.head_pose[:, :3])
     surface = surface_normals(result.neutral)
     centres = 2.0 * np.asarray(planes[1], float)[:, None] * np.asarray(planes[0], float)   # virtual cameras
@@ -81,11 +88,11 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, cands: ClipCandidates, trac
     m_all, f_all = np.nonzero(measured.T)                  # by marker, then frame
     after = np.flatnonzero((m_all[1:] == m_all[:-1]) & (np.diff(f_all) > BRIDGE_MIN_FRAMES))
     gm, ga, gb = m_all[after], f_all[after], f_all[after + 1]
-    ca, cb = cand[ga, gm], cand[gb, gm]
-    through = (direct_track[ca] == direct_track[cb]) | np.any((mirror_track[ca] == mirror_track[cb])
-                                                              & (mirror_track[ca] >= 0), axis=1)
-    for m, a, b in zip(gm[through], ga[through], gb[through]):     # a view's track runs through the gap
-        (da, ma), (db, mb) = [(direct_track[c], mirror_track[c]) for c in (cand[a, m], cand[b, m])]
+    d_a, d_b = direct_track[cand[ga, gm]], direct_track[cand[gb, gm]]
+    m_a, m_b = mirror_track[cand[ga, gm]], mirror_track[cand[gb, gm]]
+    through = (d_a == d_b) | np.any((m_a == m_b) & (m_a >= 0), axis=1)   # a view's track runs through the gap
+    for m, a, b, da, db, ma, mb in zip(gm[through], ga[through], gb[through], d_a[through], d_b[through],
+                                       m_a[through], m_b[through]):
         block = np.arange(cands.start[a + 1], cands.start[b])
         mt = mirror_track[block]
         has = mt >= 0
@@ -95,7 +102,7 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, cands: ClipCandidates, trac
         f = cands.frame[block]                          # sorted: one per frame when every step is one frame
         if block.size != b - a - 1 or (block.size > 1 and (np.diff(f) != 1).any()):
             continue                                   # a frame with none, or with two
-        if any(h[key[block]][key[block] >= 0].any() for h, key in zip(held, keys)):
+        if holds(block).any():
             continue                                   # bridged into another marker's gap already
         heads = np.einsum("mji,mj->mi", R[f], cands.points[block] - result.head_pose[f, 3:])
         path = np.vstack([result.head_frame[a, m], heads, result.head_frame[b, m]])
@@ -108,12 +115,12 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, cands: ClipCandidates, trac
         if not np.all(facing | ~seen):
             continue
         for h, key in zip(held, keys):
-            h[key[block][key[block] >= 0]] = True
+            h[key[block][key[block] >= 0]] = True                           # now this marker's
         result.candidate[f, m] = block
         result.points[f, m] = cands.points[block]
         result.head_frame[f, m] = heads
         result.conjectured[f, m] = False
         result.camera_mask[f, m] = 1 | (seen * (2 << np.arange(K))).sum(axis=1)
-        result.assigned_blob[f, m] = cands.direct[block] - frame_start[f]
+        result.assigned_blob[f, m] = cands.direct[block] - det.start[0][f]
         result.stats["bridged"][f] += 1
     return result

@@ -193,7 +193,7 @@ def _surprise_matches(surprise, ray) -> np.ndarray:
     return np.abs(along) <= DEPTH_RATIO * across + DEPTH_SLACK_MM
 
 
-def _measured_blobs(result: TrackResult, det: ClipDetections, cands) -> np.ndarray:
+def measured_blobs(result: TrackResult, det: ClipDetections, cands) -> np.ndarray:
     """Each measured cell's blob per view ``(F, N, K + 1)``, global indices (-1: none): the direct
     blob from ``assigned_blob`` (which counts within each frame), the mirror blobs from the clip
     candidate the cell took."""
@@ -206,9 +206,9 @@ def _measured_blobs(result: TrackResult, det: ClipDetections, cands) -> np.ndarr
     return blobs
 
 
-def _claimed(det: ClipDetections, blobs) -> list:
+def claimed_blobs(det: ClipDetections, blobs) -> list:
     """Per view, the blobs (global indices) a measured marker holds, as boolean masks, from
-    :func:`_measured_blobs`."""
+    :func:`measured_blobs`."""
     taken = []
     for v in range(blobs.shape[2]):
         mask = np.zeros(len(det.frame[v]), bool)
@@ -248,7 +248,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
                           & np.isfinite(expected_sd) & (K > 0))
     F = measured.shape[0]
     counts = {"two_views": np.zeros(F, int), "one_view": np.zeros(F, int)}
-    claimed = _claimed(det, _measured_blobs(result, det, cands))
+    claimed = claimed_blobs(det, measured_blobs(result, det, cands))
     if f_c.size == 0:
         result.stats["measured_in_one_view"] = counts["one_view"]
         result.stats["measured_in_two_views_after_gap_fill"] = counts["two_views"]
@@ -415,8 +415,8 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
     trees = [_blob_tree(det, v, focal_px) for v in range(K + 1)]
     # the search radius in each view: at most SPACING_SHARE of the dots' typical spacing there
     radius = np.array([min(LINK_PX, SPACING_SHARE * det.typical_spacing(v, focal_px)) for v in range(K + 1)])
-    blobs = _measured_blobs(result, det, cands)
-    claimed = _claimed(det, blobs)
+    blobs = measured_blobs(result, det, cands)
+    claimed = claimed_blobs(det, blobs)
     owner = np.full(len(det.frame[0]), -1)             # the label measured from each direct blob
     f, i = np.nonzero(measured)
     owner[blobs[f, i, 0]] = i

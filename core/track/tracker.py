@@ -277,7 +277,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     result = merge_split_labels(result, s)
     tracks = candidate_tracks(det, cands) if s.follow_2d_tracks else None
     result = merge_along_2d_tracks(result, tracks, direct_track_frames(det, cands) if tracks is not None else None)
-    result = bridge_gaps_along_2d_tracks(result, cands, tracks, det.start[0], (normals, ds))
+    result = bridge_gaps_along_2d_tracks(result, det, cands, tracks, (normals, ds))
     lap("final_pass")
     if s.single_views:
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
