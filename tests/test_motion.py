@@ -12,7 +12,8 @@ from mirrorcap.core.track.motion import (
     false_tracking,
     neighbours,
 )
-from mirrorcap.core.geometry.rigid import angles_zyx, rigid_fit, robust_rigid_fit, rotation_zyx
+from mirrorcap.core.geometry.rigid import angles_zyx, rigid_fit, robust_rigid_fit, rotation_zyx, to_head_frame
+from mirrorcap.core.track.result import camera_mask_of
 from mirrorcap.synthetic.simulate import face_rig
 
 
@@ -79,6 +80,22 @@ def test_eq_5_4_angles_round_trip():
     Ry = np.array([[np.cos(ry), 0, np.sin(ry)], [0, 1, 0], [-np.sin(ry), 0, np.cos(ry)]])
     Rz = np.array([[np.cos(rz), -np.sin(rz), 0], [np.sin(rz), np.cos(rz), 0], [0, 0, 1]])
     assert np.allclose(rotation_zyx([rx, ry, rz]), Rz @ Ry @ Rx)
+
+
+def test_head_frame_undoes_each_points_own_pose_and_masks_name_the_views():
+    """to_head_frame inverts eq. 5.4's X = R x + T with a pose per point or one for all;
+    camera_mask_of sets bit 0 for the direct view and bit k + 1 for each mirror k with a blob."""
+    rng = np.random.default_rng(3)
+    x = rng.normal(0, 40, (6, 3))
+    R = rotation_zyx(rng.uniform(-0.4, 0.4, (6, 3)))
+    T = rng.normal(0, 100, (6, 3))
+    X = np.einsum("mij,mj->mi", R, x) + T
+    assert np.allclose(to_head_frame(R, T, X), x, atol=1e-9)
+    assert np.allclose(to_head_frame(R[0], T[0], x @ R[0].T + T[0]), x, atol=1e-9)
+    assert not np.allclose(to_head_frame(R, T, X[::-1]), x, atol=1.0)      # another point's pose: not it
+    blobs = np.array([[-1, -1], [5, -1], [-1, 9], [2, 3]])
+    assert camera_mask_of(blobs).tolist() == [1, 3, 5, 7]
+    assert int(camera_mask_of(blobs[2])) == 5
 
 
 def test_kalman_follows_constant_velocity_and_reduces_noise():

@@ -9,7 +9,8 @@ head motion, the head fit's first alignment, scoring a take against its truth).
   follows the rigid part of a face whose markers also move with the expression (the
   weight-compensated estimate of Rurainsky & Eisert, section 3.3);
 * :func:`similarity_fit` -- ``s, R, t`` (Umeyama 1991);
-* :func:`rotation_zyx` / :func:`angles_zyx` -- ``R = Rz Ry Rx`` and its angles (eq. 5.4).
+* :func:`rotation_zyx` / :func:`angles_zyx` -- ``R = Rz Ry Rx`` and its angles (eq. 5.4);
+* :func:`to_head_frame` -- points with a head pose taken off, ``R^T (X - T)``.
 """
 
 from __future__ import annotations
@@ -123,6 +124,13 @@ def rotation_zyx(angles) -> np.ndarray:
     R[..., 2, 1] = cy * sx
     R[..., 2, 2] = cy * cx
     return R
+
+
+def to_head_frame(R, T, X) -> np.ndarray:
+    """Points ``X`` ``(..., 3)`` in the frame of a head at pose ``R`` ``(..., 3, 3)``, ``T`` ``(..., 3)``
+    (eq. 5.4, ``X = R x + T`` inverted: ``x = R^T (X - T)``), row by row: one pose per point or one
+    for all."""
+    return np.einsum("...ji,...j->...i", R, X - T)
 
 
 def angles_zyx(R) -> np.ndarray:

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.rigid import rotation_zyx
+from ..geometry.rigid import rotation_zyx, to_head_frame
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates
-from .result import TrackResult
+from .result import TrackResult, camera_mask_of
 from .singleview import claimed_blobs, measured_blobs
 
 #: a gap is bridged only where the dot moves at least this far in one frame of it (a slow dot's gap is the
@@ -104,7 +104,7 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
             continue                                   # a frame with none, or with two
         if holds(block).any():
             continue                                   # bridged into another marker's gap already
-        heads = np.einsum("mji,mj->mi", R[f], cands.points[block] - result.head_pose[f, 3:])
+        heads = to_head_frame(R[f], result.head_pose[f, 3:], cands.points[block])
         path = np.vstack([result.head_frame[a, m], heads, result.head_frame[b, m]])
         if np.linalg.norm(np.diff(path, axis=0), axis=1).max() < BRIDGE_STEP_MM:
             continue
@@ -120,7 +120,7 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
         result.points[f, m] = cands.points[block]
         result.head_frame[f, m] = heads
         result.conjectured[f, m] = False
-        result.camera_mask[f, m] = 1 | (seen * (2 << np.arange(K))).sum(axis=1)
+        result.camera_mask[f, m] = camera_mask_of(cands.mirror_blob[block])
         result.assigned_blob[f, m] = cands.direct[block] - det.start[0][f]
         result.stats["bridged"][f] += 1
     return result

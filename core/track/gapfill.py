@@ -10,7 +10,7 @@ import numpy as np
 from ..geometry.rigid import rotation_zyx
 from .motion import (RELATION_CORRELATION, RELATION_PRIOR_VAR, conjecture_gaps, grown_sd, learned_conjectures,
                      neighbours, previous_and_next)
-from .result import TrackResult
+from .result import TrackResult, camera_mask_of
 
 
 #: a measurement from the direct view and one mirror further from its learned neighbour relations' estimate than
@@ -110,7 +110,7 @@ def _repair_from_rivals(result: TrackResult, cands, frames, markers, expected_he
             result.candidate[f, m] = c
             result.points[f, m] = cands.points[c]
             result.head_frame[f, m] = head[best]
-            result.camera_mask[f, m] = 1 | int(((cands.mirror_blob[c] >= 0) * (2 << np.arange(K))).sum())
+            result.camera_mask[f, m] = camera_mask_of(cands.mirror_blob[c])
             fixed[n] = True
     return fixed
 

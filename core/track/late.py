@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..geometry.mirror import reflect_points
-from ..geometry.rigid import rotation_zyx
+from ..geometry.rigid import rotation_zyx, to_head_frame
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates
 from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
@@ -69,7 +69,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     f = cands.frame[idx]
     pose = first_pass.head_pose[f]
     R = rotation_zyx(pose[:, :3])  # (M, 3, 3)
-    head = np.einsum("mji,mj->mi", R, cands.points[idx] - pose[:, 3:])  # R^T (X - T)
+    head = to_head_frame(R, pose[:, 3:], cands.points[idx])
     col = det.colour[0][cands.direct[idx]]
     pairs = _pairs_frames_apart(np.c_[head, col * COLOUR_SPACING_MM], f, link_mm, link_frames)
     n_comp, comp = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),

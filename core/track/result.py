@@ -65,6 +65,13 @@ class TrackResult:
     undecided: list = field(default_factory=list)  # direct-view markers of the first frames never paired (rows)
 
 
+def camera_mask_of(mirror_blob) -> np.ndarray:
+    """:attr:`TrackResult.camera_mask` of measurements from the direct view and the mirrors whose blob
+    ``mirror_blob`` ``(..., K)`` gives (-1: not seen in that mirror): bit 0 direct, bit ``k + 1`` mirror ``k``."""
+    mirror_blob = np.asarray(mirror_blob)
+    return 1 | ((mirror_blob >= 0) * (2 << np.arange(mirror_blob.shape[-1]))).sum(axis=-1)
+
+
 def earns_place(measured, min_frames: int, min_fraction: float) -> np.ndarray:
     """The markers that :func:`keep_measured` keeps, from ``measured`` ``(F, N)``."""
     F = measured.shape[0]

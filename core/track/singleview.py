@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 
 from ..capture.views import ClipDetections
 from ..geometry.mirror import points_from_planes, reflect_points
-from ..geometry.rigid import rotation_zyx
+from ..geometry.rigid import rotation_zyx, to_head_frame
 from .candidates import spans
 from .late import measured_together, merge_labels
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings
@@ -353,7 +353,7 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
     done = np.isfinite(new[:, 0])
     f, i = f_c[done], i_c[done]
     result.points[f, i] = new[done]
-    result.head_frame[f, i] = np.einsum("mji,mj->mi", R[f], new[done] - result.head_pose[f, 3:])
+    result.head_frame[f, i] = to_head_frame(R[f], result.head_pose[f, 3:], new[done])
     # two views measure the marker; one view only refines its conjecture (the depth is still the neighbours')
     both = two_view[done]
     result.conjectured[f, i] = ~both
@@ -505,7 +505,7 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
             rows = np.flatnonzero(ok)
             gf, mk = g[rows], marker[rows]
             result.points[gf, mk] = point[rows]
-            result.head_frame[gf, mk] = np.einsum("mji,mj->mi", R[gf], point[rows] - result.head_pose[gf, 3:])
+            result.head_frame[gf, mk] = to_head_frame(R[gf], result.head_pose[gf, 3:], point[rows])
             result.conjectured[gf, mk] = False
             result.camera_mask[gf, mk] = 1 | (1 << mirror[rows])
             result.assigned_blob[gf, mk] = new_blob[rows, 0] - det.start[0][gf]

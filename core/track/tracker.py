@@ -54,7 +54,7 @@ from .singleview import follow_dots_through_gaps, measure_in_single_views, meeti
 from .motion import (ConstantVelocityKalman, conjecture_motion, conjecture_since_last_seen, false_tracking,
                      neighbours)
 from .pairing import candidate_tracks, continuing_candidate, direct_track_frames, paired_tracks, partner_blobs
-from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, keep_measured
+from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, camera_mask_of, keep_measured
 from .seeds import seeded_tracks
 
 #: measurements a marker must have run on a mirror track before that track's pairing is preferred
@@ -386,7 +386,6 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
     query = np.c_[neutral, colour * COLOUR_SPACING_MM]
     K = cands.mirror_blob.shape[1]
     keys = [cands.direct] + [cands.mirror_blob[:, k] for k in range(K)]
-    view_bit = (2 ** np.arange(1, K + 1))[None, :]
     trees = {}
     # 2D continuity: each candidate's direct and mirror blobs' 2D tracks (.pairing.track_2d)
     cand_dtrack, cand_mtrack = candidate_tracks(det, cands) if s.follow_2d_tracks else (None, None)
@@ -514,8 +513,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
         counts["conjectured"][t] = filled.sum()
         counts["measured"][t] = valid.sum()
         if valid.any():
-            blobs = cands.mirror_blob[a[valid]]
-            camera_mask[t, valid] = 1 | ((blobs >= 0) * view_bit).sum(axis=1)
+            camera_mask[t, valid] = camera_mask_of(cands.mirror_blob[a[valid]])
             assigned_blob[t, valid] = cands.direct[a[valid]] - det.start[0][t]
             candidate[t, valid] = a[valid]
         if progress:
