@@ -509,7 +509,7 @@ def test_stop_34s_new_clips(tmp_path, capsys, name, reported, over_2mm):
     assert abs(ratio_error) < 0.003
 
 
-@pytest.mark.parametrize("name, reported, over_2mm", [("pitch800", 0.965, 66), ("vga480", 0.985, 14)])
+@pytest.mark.parametrize("name, reported, over_2mm", [("pitch800", 0.965, 38), ("vga480", 0.985, 12)])
 def test_stop_36s_held_out_clips(tmp_path, capsys, name, reported, over_2mm):
     """#18, stop 36: two rigs rendered at the stop and tuned on by nothing. pitch800 (800x600, a 4:3
     sensor, 200 dots of 2.8 mm, mirrors at 40 deg, +-12 deg pitch): no switch, no split label, 96.9 % of
@@ -519,8 +519,10 @@ def test_stop_36s_held_out_clips(tmp_path, capsys, name, reported, over_2mm):
     (8 points), and a dot hidden from the camera had its direct 2D track slip onto that image, 17 mm behind
     it and a pixel away (25 points, up to 6.7 mm). vga480 (640x480,
     160 dots of 3 mm, mirrors at 48 deg, face 700 mm away, +-14 deg yaw): no switch, no split label, 98.9 %,
-    11 points over 2 mm. The bounds hold the measured figures (a regression guard; the done-when is 99 %
-    and none)."""
+    11 points over 2 mm. With the direct view's 2D tracks cut where two like dots come apart
+    (pairing.cut_at_splits) and the gap bridge refusing a dot the camera sees at a grazing angle:
+    pitch800 35 points over 2 mm (60), vga480 10 (11), both at the same completeness; 60 and 11 fail
+    these bounds (the done-when is 99 % and none)."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["seen_reported_fraction"] > reported

@@ -478,15 +478,37 @@ def test_a_fast_dots_gap_is_bridged_where_its_2d_tracks_bracket_it():
     one candidate on the marker's own tracks at either end, its blobs nobody else's, is measured --
     not a stray mirror blob on the direct track nor another dot's candidate on the mirror track. Not
     bridged: a frame with no such candidate, a blob another marker measures, a slow dot (the gap is
-    the passes' verdict), a dot the mirror sees at a grazing angle (its image drifts off the dot)."""
+    the passes' verdict), a dot the mirror sees at a grazing angle (its image drifts off the dot), and
+    (stop 36, vga480: a chin dot's bridge took its direct blob merged with a dot 29 mm behind it) a dot
+    the camera sees at a grazing angle though the mirror sees it face on."""
     take, path, m = _bridge_case()
     gap = np.arange(3, 7)
     assert (take.assigned_blob[gap, m] >= 0).all() and take.stats["bridged"][gap].tolist() == [1, 1, 1, 1]
     assert np.allclose(take.points[gap, m], path[gap]) and not take.conjectured[gap, m].any()
     assert (take.camera_mask[gap, m] == 3).all() and take.assigned_blob[5, m] == 0
-    for case in ({"missing_frame": 5}, {"held_frame": 4}, {"step_mm": 0.3}, {"facing": (0.0, 0.0, -1.0)}):
+    for case in ({"missing_frame": 5}, {"held_frame": 4}, {"step_mm": 0.3}, {"facing": (0.0, 0.0, -1.0)},
+                 {"facing": (-1.0, 0.0, -0.16)}):
         take, path, m = _bridge_case(**case)
         assert not (take.assigned_blob[3:7, m] >= 0).any() and take.stats["bridged"].sum() == 0, case
+
+
+def test_a_view_sees_a_dot_face_on_within_the_angle_of_its_surface_normal():
+    """geometry.surface: the normals of a bent sheet of markers by principal components point to the
+    camera side; seen_face_on compares each camera's direction with the normal (the camera at the
+    origin, a mirror's virtual camera beside the face)."""
+    from mirrorcap.core.geometry.surface import seen_face_on, surface_normals
+
+    g = np.stack(np.meshgrid(np.arange(-3, 4), np.arange(-3, 4)), -1).reshape(-1, 2) * 6.0
+    points = np.c_[g, 600.0 + 0.004 * (g ** 2).sum(axis=1)]                # a bowl opening towards the camera
+    normals = surface_normals(points)
+    centre = np.flatnonzero((g == 0).all(axis=1))[0]
+    assert np.allclose(normals[centre], [0.0, 0.0, -1.0], atol=1e-6)
+    assert np.all(normals[:, 2] < -0.8)                                      # all turned towards the camera
+    cams = np.array([[0.0, 0.0, 0.0], [-1200.0, 0.0, 600.0], [-900.0, 0.0, -300.0]])
+    on = seen_face_on(normals[centre], points[centre], cams, 80.0)
+    assert on.tolist() == [True, False, True]                               # 0, 90 and 45 deg off the normal
+    assert seen_face_on(normals[centre], points[centre], cams, 40.0).tolist() == [True, False, False]
+    assert not seen_face_on(np.full(3, np.nan), points[centre], cams, 80.0).any()
 
 
 def test_a_single_mirror_measurement_its_neighbours_disown_becomes_a_conjecture():

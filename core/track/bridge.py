@@ -1,12 +1,13 @@
 """A fast dot's gap measured where its 2D tracks bracket it (:func:`bridge_gaps_along_2d_tracks`), with
-the face's surface normals at its markers (:func:`surface_normals`) to refuse a mirror that sees the
-dot at a grazing angle."""
+the face's surface normals at its markers (:func:`..geometry.surface.surface_normals`) to refuse a view that
+sees the dot at a grazing angle."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..geometry.rigid import rotation_zyx, to_head_frame
+from ..geometry.surface import seen_face_on, surface_normals
 from ..capture.views import ClipDetections
 from .candidates import ClipCandidates
 from .result import TrackResult, camera_mask_of
@@ -24,25 +25,6 @@ BRIDGE_GRAZING_DEG = 80.0
 BRIDGE_MIN_FRAMES = 2
 
 
-def surface_normals(points, neighbours_k: int = 9) -> np.ndarray:
-    """Unit normals ``(N, 3)`` of the face at its markers ``points (N, 3)`` (camera frame): each the
-    least-spread direction of the marker and its ``neighbours_k - 1`` nearest markers (the plane
-    through them by principal components), turned towards the camera. NaN rows stay NaN."""
-    from scipy.spatial import cKDTree
-
-    pts = np.asarray(points, float)
-    normals = np.full(pts.shape, np.nan)
-    ok = np.flatnonzero(np.isfinite(pts).all(axis=1))
-    if ok.size < neighbours_k:
-        return normals
-    _, idx = cKDTree(pts[ok]).query(pts[ok], k=neighbours_k)
-    spread = pts[ok][idx] - pts[ok][idx].mean(axis=1, keepdims=True)              # (n, k, 3)
-    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))
-    n = vectors[:, :, 0]                                                           # smallest eigenvalue first
-    normals[ok] = n * np.where(np.einsum("ni,ni->n", n, pts[ok]) > 0, -1.0, 1.0)[:, None]
-    return normals
-
-
 def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands: ClipCandidates, tracks,
                                 planes) -> TrackResult:
     """Offline, a marker's gap measured where the 2D tracks bracket it (:func:`.pairing.track_2d`;
@@ -55,10 +37,11 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
     tracks are each the marker's at ``a`` or at ``b`` in that mirror, and whose blobs no other marker
     measures then -- when the gap spans :data:`BRIDGE_MIN_FRAMES` or more, every frame of it has one (a
     chain that connects both ends), the dot
-    moves :data:`BRIDGE_STEP_MM` or more in a frame of it, and each mirror it is seen through sees
-    it within :data:`BRIDGE_GRAZING_DEG` of its surface normal (:func:`surface_normals` of the neutral
-    face turned with the head pose, against the direction to the mirror's virtual camera, the camera
-    centre reflected in the plane: eq. 3.9). ``det``: the clip's detections (:class:`.ClipDetections`);
+    moves :data:`BRIDGE_STEP_MM` or more in a frame of it, and the camera and each mirror it is seen
+    through see it within :data:`BRIDGE_GRAZING_DEG` of its surface normal
+    (:func:`..geometry.surface.seen_face_on`: the normal of the neutral face turned with the head pose,
+    against the direction to the camera or the mirror's virtual camera, the camera centre reflected in
+    the plane, eq. 3.9; the camera's own grazing view let a chin dot's bridge take a merged image, vga480). ``det``: the clip's detections (:class:`.ClipDetections`);
     ``planes``: the mirrors' ``(normals (K, 3), ds (K,))``. In place; ``stats["bridged"]`` counts the
     cells per frame."""
     cand = result.candidate
@@ -82,8 +65,7 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
     claimed = holds(np.arange(len(cands.direct)))
     R = rotation_zyx(result.head_pose[:, :3])
     surface = surface_normals(result.neutral)
-    centres = 2.0 * np.asarray(planes[1], float)[:, None] * np.asarray(planes[0], float)   # virtual cameras
-    cos_limit = np.cos(np.radians(BRIDGE_GRAZING_DEG))
+    centres = np.vstack([np.zeros(3), 2.0 * np.asarray(planes[1], float)[:, None] * np.asarray(planes[0], float)])
     # every gap of BRIDGE_MIN_FRAMES or more between two measurements, in one pass: (marker, a, b)
     m_all, f_all = np.nonzero(measured.T)                  # by marker, then frame
     after = np.flatnonzero((m_all[1:] == m_all[:-1]) & (np.diff(f_all) > BRIDGE_MIN_FRAMES))
@@ -109,10 +91,8 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
         if np.linalg.norm(np.diff(path, axis=0), axis=1).max() < BRIDGE_STEP_MM:
             continue
         normal = np.einsum("fij,j->fi", R[f], surface[m])
-        seen = cands.mirror_blob[block] >= 0                                         # (n, K)
-        view = centres[None] - cands.points[block][:, None]                          # (n, K, 3)
-        facing = np.einsum("fi,fki->fk", normal, view) >= cos_limit * np.linalg.norm(view, axis=2)
-        if not np.all(facing | ~seen):
+        seen = np.c_[np.ones(block.size, bool), cands.mirror_blob[block] >= 0]       # (n, 1 + K): the views used
+        if not np.all(seen_face_on(normal, cands.points[block], centres, BRIDGE_GRAZING_DEG) | ~seen):
             continue
         for h, key in zip(held, keys):
             h[key[block][key[block] >= 0]] = True                           # now this marker's

@@ -255,15 +255,65 @@ def clip_link_gate_px(det: ClipDetections, view: int) -> float:
     return max(8.0, CLIP_LINK_SPACING_SHARE * det.typical_spacing(view))
 
 
+#: a new 2D track born this near (a share of the view's typical blob spacing) a track of the same colour is where
+#: two dots imaged as one blob came apart (:func:`cut_at_splits`; pitch800's two jaw-side dots: 3.1 px)
+SPLIT_SPACING_SHARE = 0.5
+
+
+def cut_at_splits(det: ClipDetections, view: int, ids: np.ndarray, radius_px: float) -> np.ndarray:
+    """2D track ids ``ids`` ``(n_v,)`` of ``view``'s blobs, each track cut where a new track of its colour is
+    born within ``radius_px`` of its blob. Two like dots imaged as one blob for a while (a dot turning
+    behind another at the face's silhouette) come apart as the old track and a new one, and which of the two
+    dots the old track goes on with is the linker's guess: from that frame on it is a new track, and what
+    follows the tracks (:func:`continuing_candidate`, the late merges, the gap bridge) decides afresh.
+    (Blobs of two colours cannot swap: :func:`track_2d` links one colour.)"""
+    from scipy.spatial import cKDTree
+
+    ids = np.asarray(ids, int).copy()
+    if ids.size == 0:
+        return ids
+    frame = det.frame[view]
+    n = int(ids.max()) + 1
+    born = np.full(n, det.n_frames)
+    np.minimum.at(born, ids, frame)
+    newborn = np.flatnonzero((frame == born[ids]) & (frame > 0))      # each track's first blob, after frame 0
+    if newborn.size == 0:
+        return ids
+    xy = det.xy[view]
+    stack = 10.0 * (np.ptp(xy) + 1.0)                                    # frames far apart: one tree
+    pts = np.c_[xy, frame * stack]
+    near = cKDTree(pts[newborn]).sparse_distance_matrix(cKDTree(pts), radius_px, output_type="ndarray")
+    b, o = newborn[near["i"]], near["j"].astype(int)
+    split = (o != b) & (born[ids[o]] < frame[b]) & (det.colour[view][o] == det.colour[view][b])
+    if not split.any():
+        return ids
+    cut_from = np.full(n, det.n_frames)
+    np.minimum.at(cut_from, ids[o[split]], frame[b[split]])
+    cut = np.flatnonzero(cut_from < det.n_frames)
+    renamed = np.full(n, -1)
+    renamed[cut] = n + np.arange(cut.size)
+    after = frame >= cut_from[ids]
+    ids[after] = renamed[ids[after]]
+    return ids
+
+
 def blob_tracks(det: ClipDetections, cands) -> list:
     """The 2D track (:func:`track_2d`, over the whole clip) of every blob of each view, ``(n_v,)``
-    per view; computed once per clip (kept with the clip's candidates ``cands``, which every
+    per view, the direct view's cut where two like dots merged in one blob come apart
+    (:func:`cut_at_splits`); computed once per clip (kept with the clip's candidates ``cands``, which every
     caller has)."""
     if "_blob_tracks" not in cands.__dict__:
-        cands.__dict__["_blob_tracks"] = [
-            np.concatenate([np.asarray(i, int) for i in
-                            track_2d(det.per_frame(v), det.per_frame(v, "colour"), clip_link_gate_px(det, v))[0]])
-            if len(det.xy[v]) else np.zeros(0, int) for v in range(cands.mirror_blob.shape[1] + 1)]
+        out = []
+        for v in range(cands.mirror_blob.shape[1] + 1):
+            if not len(det.xy[v]):
+                out.append(np.zeros(0, int))
+                continue
+            ids = np.concatenate([np.asarray(i, int) for i in
+                                  track_2d(det.per_frame(v), det.per_frame(v, "colour"), clip_link_gate_px(det, v))[0]])
+            if v == 0:   # the mirrors' cut too: mirror35 19 -> 30 points over 2 mm, dots720 35 -> 38
+                ids = cut_at_splits(det, v, ids, SPLIT_SPACING_SHARE * det.typical_spacing(v))
+            out.append(ids)
+        cands.__dict__["_blob_tracks"] = out
     return cands.__dict__["_blob_tracks"]
 
 
