@@ -484,6 +484,16 @@ def test_a_dot_seen_only_directly_does_not_pair_with_another_dots_grazing_image(
         assert s["seen_reported_fraction"] > 0.97
 
 
+def _holds_on_a_held_out_clip(s, report, ratio_error, reported, over_2mm):
+    """No identity switch, no split label, every label a true marker, more than ``reported`` of the seen
+    marker-frames reported, at most ``over_2mm`` points over 2 mm, the mirrors' scales linked within 0.3 %."""
+    assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
+    assert s["seen_reported_fraction"] > reported
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
+    assert abs(ratio_error) < 0.003
+
+
 @pytest.mark.parametrize("name, reported, over_2mm", [("yaw540", 0.985, 2), ("dots720", 0.99, 40),
                                                      ("hold648", 0.975, 15), ("tempo720", 0.982, 22)])
 def test_stop_34s_new_clips(tmp_path, capsys, name, reported, over_2mm):
@@ -501,15 +511,10 @@ def test_stop_34s_new_clips(tmp_path, capsys, name, reported, over_2mm):
     expressions 2.8x as fast; rendered during stop 35 and held out from its choices): 98.2 % with the
     silhouette rule, 98.4 % with the gap bridge, 98.6 % with the clip's wider 2D links; no switch, no split
     label, 18 points over 2 mm."""
-    s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
-    assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
-    assert s["seen_reported_fraction"] > reported
-    err_mm = s["error_mm"][:, s["ids"] >= 0]
-    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
-    assert abs(ratio_error) < 0.003
+    _holds_on_a_held_out_clip(*_tracked_stress_clip(name, tmp_path, capsys), reported, over_2mm)
 
 
-@pytest.mark.parametrize("name, reported, over_2mm", [("pitch800", 0.965, 38), ("vga480", 0.985, 12)])
+@pytest.mark.parametrize("name, reported, over_2mm", [("pitch800", 0.965, 30), ("vga480", 0.985, 12)])
 def test_stop_36s_held_out_clips(tmp_path, capsys, name, reported, over_2mm):
     """#18, stop 36: two rigs rendered at the stop and tuned on by nothing. pitch800 (800x600, a 4:3
     sensor, 200 dots of 2.8 mm, mirrors at 40 deg, +-12 deg pitch): no switch, no split label, 96.9 % of
@@ -521,14 +526,10 @@ def test_stop_36s_held_out_clips(tmp_path, capsys, name, reported, over_2mm):
     160 dots of 3 mm, mirrors at 48 deg, face 700 mm away, +-14 deg yaw): no switch, no split label, 98.9 %,
     11 points over 2 mm. With the direct view's 2D tracks cut where two like dots come apart
     (pairing.cut_at_splits) and the gap bridge refusing a dot the camera sees at a grazing angle:
-    pitch800 35 points over 2 mm (60), vga480 10 (11), both at the same completeness; 60 and 11 fail
-    these bounds (the done-when is 99 % and none)."""
-    s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
-    assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
-    assert s["seen_reported_fraction"] > reported
-    err_mm = s["error_mm"][:, s["ids"] >= 0]
-    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
-    assert abs(ratio_error) < 0.003
+    pitch800 35 points over 2 mm (60), vga480 10 (11), both at the same completeness; with late markers
+    resting where their earliest stretch says (late.REST_AGREE_MM) pitch800 27. 60 and 11 fail these
+    bounds (the done-when is 99 % and none)."""
+    _holds_on_a_held_out_clip(*_tracked_stress_clip(name, tmp_path, capsys), reported, over_2mm)
 
 
 def test_a_late_markers_rest_is_read_from_its_earliest_stretch(tmp_path, capsys):
