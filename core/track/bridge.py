@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.mirror import reflect_points
 from ..geometry.rigid import rotation_zyx, to_head_frame
 from ..geometry.surface import seen_face_on, surface_normals
 from ..capture.views import ClipDetections
@@ -41,8 +42,9 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
     through see it within :data:`BRIDGE_GRAZING_DEG` of its surface normal
     (:func:`..geometry.surface.seen_face_on`: the normal of the neutral face turned with the head pose,
     against the direction to the camera or the mirror's virtual camera, the camera centre reflected in
-    the plane, eq. 3.9; the camera's own grazing view let a chin dot's bridge take a merged image, vga480). ``det``: the clip's detections (:class:`.ClipDetections`);
-    ``planes``: the mirrors' ``(normals (K, 3), ds (K,))``. In place; ``stats["bridged"]`` counts the
+    the plane, eq. 3.9; the camera's own grazing view let a chin dot's bridge take a merged image,
+    vga480). ``det``: the clip's detections (:class:`.ClipDetections`); ``planes``: the mirrors'
+    ``(normals (K, 3), ds (K,))``. In place; ``stats["bridged"]`` counts the
     cells per frame."""
     cand = result.candidate
     F, N = result.assigned_blob.shape
@@ -65,7 +67,8 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
     claimed = holds(np.arange(len(cands.direct)))
     R = rotation_zyx(result.head_pose[:, :3])
     surface = surface_normals(result.neutral)
-    centres = np.vstack([np.zeros(3), 2.0 * np.asarray(planes[1], float)[:, None] * np.asarray(planes[0], float)])
+    normals, ds = np.asarray(planes[0], float), np.asarray(planes[1], float)
+    centres = np.vstack([np.zeros(3), reflect_points(np.zeros_like(normals), normals, ds)])   # camera, virtual ones
     # every gap of BRIDGE_MIN_FRAMES or more between two measurements, in one pass: (marker, a, b)
     m_all, f_all = np.nonzero(measured.T)                  # by marker, then frame
     after = np.flatnonzero((m_all[1:] == m_all[:-1]) & (np.diff(f_all) > BRIDGE_MIN_FRAMES))
