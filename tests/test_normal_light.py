@@ -356,21 +356,46 @@ def test_re_solve_from_tracks_re_estimates_the_mirrors_and_rejects_a_wrong_corre
     assert s["identity_switches"] == 0 and s["max_mm"] < 2.0
 
 
-def test_held_out_full_hd_clip(tmp_path, capsys):
-    """A normal-light clip rendered after every setting here was chosen (`make normal-clips`: 1920x1080,
+@pytest.mark.parametrize("name, rms_mm, reported, ratio", [("hd", 0.45, 0.935, 0.003), ("med720", 0.5, 0.94, 0.006)])
+def test_held_out_normal_light_clips(tmp_path, capsys, name, rms_mm, reported, ratio):
+    """Normal-light clips rendered after every setting here was chosen (`make normal-clips`). hd (1920x1080,
     medium skin, 180 dots of 3 mm, mirrors at 40 deg, +-14 deg yaw): no identity switch, the take within
-    0.45 mm RMS after one similarity (measured 0.35), >= 91 % of the seen marker-frames reported
-    (measured 92.6 %; the detector finds both images of 87.3 %), the mirrors' scales within 0.3 %.
-    The mirror images' centroids sit 0.8-1.0 px outwards of the dots' centres here (0.15 px at 720p):
-    the dots are spheres half a millimetre proud of the skin, and a mirror sees them from the side."""
+    0.45 mm RMS after one similarity (measured 0.35), 92.5 % of the seen marker-frames reported; the mirror
+    images' centroids sit 0.8-1.0 px outwards of the dots' centres here (0.15 px at 720p): the dots are
+    spheres half a millimetre proud of the skin, and a mirror sees them from the side. med720 (1280x720,
+    medium skin, 170 dots of 2.8 mm, mirrors at 43 deg, +-12 deg yaw; rendered at stop 36): 93.1 %, 75
+    points over 2 mm, 0.53 mm RMS. Stop 36, a candidate pixel's hue must differ from the skin's
+    (colordots.FROM_SKIN_DEG; the shadow of the skin's hue beside a dot moved it): hd 94.4 % and 0.27 mm,
+    med720 94.7 % and 0.44 mm (37 points over 2 mm); 92.5 % and 93.1 % fail these bounds. med720's mirror
+    scales are linked 0.42 % off (0.26 % before the change; the agreement check passes either way)."""
 
-    clip = ROOT / "sample_scenes" / "normal" / "hd"
+    clip = ROOT / "sample_scenes" / "normal" / name
     code, _, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
                          "--rig", clip / "rig.json", "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json",
                          "-q"], capsys)
     assert code == 0, err
     s, _, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
-    assert abs(ratio_error) < 0.003
+    assert abs(ratio_error) < ratio
     assert s["identity_switches"] == 0 and s["markers_tracked"] >= 100
-    assert s["rms_mm"] < 0.45
-    assert s["seen_reported_fraction"] >= 0.91
+    assert s["rms_mm"] < rms_mm
+    assert s["seen_reported_fraction"] >= reported
+
+
+def test_a_shadow_of_the_skins_hue_beside_a_dot_does_not_move_it():
+    """#18, stop 36, the full-HD clip: a blue dot at the jaw line touched the jaw's shadow -- darker and
+    more saturated than the skin, so unlike it in chromaticity, but of the skin's hue -- and the two were
+    one blob, its centre 8 px off the dot: never paired, never tracked. A candidate pixel (brighter than
+    twice min_value) must differ from the skin around it in hue by FROM_SKIN_DEG, so the shadow is not
+    part of the dot. A dark pixel's hue is noise, so the test leaves those alone."""
+    skin_bgr, shadow_bgr, blue_bgr = (150, 170, 210), (70, 100, 160), (230, 70, 30)
+    img = np.zeros((200, 200, 3), np.uint8)
+    img[:] = skin_bgr
+    img[105:113, 80:121] = shadow_bgr                                  # the shadow, touching the dot's bottom
+    yy, xx = np.mgrid[:200, :200]
+    img[(xx - 100) ** 2 + (yy - 100) ** 2 <= 25] = blue_bgr            # a dot of 5 px radius at (100, 100)
+    det = marker_extractor(ColorClasses.default("normal"), ExtractionSettings(light="normal"))(img)
+    near = np.hypot(det.x - 100.0, det.y - 100.0)
+    # within a pixel (the seam where blue meets the shadow blends to a hue of neither); joined, 3.2 px off
+    # and 408 px in area, the dot 81 px alone
+    assert near.min() < 1.2 and det.color[int(np.argmin(near))] == ColorClasses.default("normal").names.index("blue")
+    assert det.area[int(np.argmin(near))] < 200 and len(det.x) == 1   # and the shadow is no dot

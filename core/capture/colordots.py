@@ -11,7 +11,9 @@ change when a lamp dims or a surface turns away from it -- against the *local* b
 2. **contrast** -- ``|c - c_bg|`` per pixel, where ``c`` is the pixel's chromaticity; pixels
    with contrast above ``min_contrast`` and brightest channel above ``min_value`` and above
    ``min_value_ratio`` of the background's (too dark a pixel -- the shadow a dot casts, the
-   inside of the mouth -- has no reliable colour) are candidate dot pixels. Only pixels that differ from the
+   inside of the mouth -- has no reliable colour) and, if brighter than twice ``min_value``, whose hue
+   differs from the background's by :data:`FROM_SKIN_DEG` (shading keeps the skin's hue: a shadow beside
+   a dot would join its blob) are candidate dot pixels. Only pixels that differ from the
    background by more than ``min_difference`` levels in some channel, averaged over 3x3 pixels,
    are looked at (a cheap first cut: a dot differs from skin by far more);
 3. **connected components** (8-connected, OpenCV) of the candidate pixels; each blob's
@@ -26,7 +28,7 @@ change when a lamp dims or a surface turns away from it -- against the *local* b
    class's than the skin's around it, and its mean chromaticity at least ``min_dot_contrast``
    from the skin's (a shadow or the inside of the mouth has the skin's hue). With
    ``max_hue_deg >= 180`` (learning classes, when there are none yet) any blob whose hue is
-   :data:`LEARN_FROM_SKIN_DEG` from the skin's counts;
+   :data:`FROM_SKIN_DEG` from the skin's counts;
 5. **merge** fragments of one dot (same class, centres closer than half of
    ``marker_diameter_px``, by default ``MAX_DOT_PX``: no interlaced fields break a dot here, and two neighbouring dots of
    one colour at the face's silhouette must stay two) and drop **specks** under ``min_area``
@@ -50,7 +52,9 @@ from ..common.errors import InputError
 from .detections import MAX_DOT_PX, Detections, blob_shape, empty_detections, merge_fragments
 
 BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times smaller
-LEARN_FROM_SKIN_DEG = 15.0  # learning classes: a dot's hue differs from the skin around it by this much
+#: a dot's hue differs from the skin around it by this much: each candidate pixel's (step 2), and, when the
+#: classes are learned, each blob's
+FROM_SKIN_DEG = 15.0
 
 
 def hue_saturation(rgb) -> tuple:
@@ -108,6 +112,14 @@ class ColorDotExtractor:
         value = np.maximum(np.maximum(b, g), r)
         ok = ((contrast > s.min_contrast) & (value >= s.min_value)
               & (value >= s.min_value_ratio * np.maximum(np.maximum(bb, bg_g), br)))
+        # ... and a hue of its own: shading of the skin (the jaw's shadow, a crease) keeps the skin's hue, and
+        # joined to a dot beside it pulled the blob's centre 8 px off (full HD: a blue dot at the jaw line
+        # never tracked). Below twice min_value a pixel's hue is noise: there the test is left out (a dark
+        # region cut into its noisy pieces gave the light clip a false dot at a view boundary)
+        hue, _ = hue_saturation(px[:, ::-1])
+        bg_hue, _ = hue_saturation(pb[:, ::-1])
+        from_skin = np.degrees(np.abs(np.angle(np.exp(1j * (hue - bg_hue)))))
+        ok &= (from_skin >= FROM_SKIN_DEG) | (value < 2.0 * s.min_value)
         return idx[ok], contrast[ok], value[ok], px[ok], pb[ok]
 
     def __call__(self, frame_bgr: np.ndarray):
@@ -152,7 +164,7 @@ class ColorDotExtractor:
         if s.max_hue_deg < 180.0:
             hue_ok = (hue_diff <= s.max_hue_deg) & (hue_diff < from_skin)
         else:                         # no classes yet (colors learn): any colour that is not the skin's
-            hue_ok = from_skin >= LEARN_FROM_SKIN_DEG
+            hue_ok = from_skin >= FROM_SKIN_DEG
         keep = (hue_ok & (saturation >= s.min_saturation) & (sums[:, 3] >= s.min_area)
                 & (elongation <= s.max_streak) & (blob_contrast >= s.min_dot_contrast))
         return Detections(x=cx[keep], y=cy[keep], color=cls[keep], area=sums[keep, 3].astype(int),

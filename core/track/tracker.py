@@ -254,8 +254,9 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     first = _track_pass(det, cands, replace(s, follow_2d_tracks=False), markers, given, None)
     lap("first_pass")
     if given is None:
-        with np.errstate(invalid="ignore"):  # markers never reported: no motion to rank
-            motion = np.nanmean(np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2, axis=0)
+        moved = np.linalg.norm(first.head_frame - first.neutral[None], axis=2) ** 2
+        seen = np.isfinite(moved).sum(axis=0)          # markers never reported: no motion to rank (NaN)
+        motion = np.where(seen > 0, np.nansum(moved, axis=0) / np.maximum(seen, 1), np.nan)
         if np.isfinite(motion).sum() < 4:
             raise DegenerateError("no rigid markers found: fewer than 4 markers were followed through the take; "
                                   "name them in RIG.json (\"rigid\") or check the detections")
