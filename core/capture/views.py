@@ -16,6 +16,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+def frame_spaced(points, frame, within: float, *extent) -> np.ndarray:
+    """``points`` ``(M, D)`` with the ``frame`` number ``(M,)`` as one more coordinate, in
+    steps far larger than ``within`` and than any coordinate of ``points`` or of the other
+    arrays in ``extent``: a KD-tree over such points pairs only points of the frames meant."""
+    spacing = 10.0 * (sum(np.abs(a).max() for a in (points, *extent)) + within + 1.0)
+    return np.c_[points, np.asarray(frame) * spacing]
+
+
 @dataclass
 class FrameDets:
     """One frame's detections per view (pixels, colour-class indices)."""
@@ -81,7 +89,7 @@ class ClipDetections:
         if pick.sum() < 2:
             return np.inf
         xy = self.xy[view][pick] if focal_px is None else self.norm[view][pick] * focal_px
-        points = np.c_[xy, self.frame[view][pick] * 10.0 * (np.ptp(xy) + 1.0)]   # frames far apart: one tree
+        points = frame_spaced(xy, self.frame[view][pick], 0.0)                     # one tree for every frame
         d, _ = cKDTree(points).query(points, k=2)
         return float(np.median(d[:, 1]))
 

@@ -17,8 +17,9 @@ from .singleview import claimed_blobs, measured_blobs
 #: a gap is bridged only where the dot moves at least this far in one frame of it (a slow dot's gap is the
 #: passes' verdict on its blobs, not an expression outrunning them: the light clip got 3 points over 2 mm)
 BRIDGE_STEP_MM = 1.0
-#: ... and only through a mirror that sees the dot within this angle of its surface normal: a grazing image
-#: drifts off its dot along the 2D track (webcam: 12 of 26 bridged cells over 2 mm without this test)
+#: ... and only where the camera and each mirror used see the dot within this angle of its surface normal: a
+#: grazing image drifts off its dot along the 2D track (webcam: 12 of 26 bridged cells over 2 mm without this
+#: test on the mirrors; vga480 a chin dot's bridge through a merged direct image without it on the camera)
 BRIDGE_GRAZING_DEG = 80.0
 #: ... and only a gap of this many frames or more: one missing frame is the passes' verdict with the dot's
 #: position known on both sides (a false blob beside a missed detection continues its 2D track: the tracking

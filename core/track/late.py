@@ -12,7 +12,7 @@ import numpy as np
 
 from ..geometry.mirror import reflect_points
 from ..geometry.rigid import rotation_zyx, to_head_frame
-from ..capture.views import ClipDetections
+from ..capture.views import ClipDetections, frame_spaced
 from .candidates import ClipCandidates
 from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, keep_measured
@@ -203,27 +203,19 @@ def _off_in_mirrors(markers, views, point, used, planes, off_mm: float) -> bool:
     return True
 
 
-def _frame_spaced(points, frame, within: float, *extent) -> np.ndarray:
-    """``points`` ``(M, D)`` with the ``frame`` number ``(M,)`` as one more coordinate, in
-    steps far larger than ``within`` and than any coordinate of ``points`` or of the other
-    arrays in ``extent``: a KD-tree over such points pairs only points of the frames meant."""
-    spacing = 10.0 * (sum(np.abs(a).max() for a in (points, *extent)) + within + 1.0)
-    return np.c_[points, np.asarray(frame) * spacing]
-
-
 def _pairs_frames_apart(points, frame, within: float, max_gap: int) -> np.ndarray:
     """Pairs ``(P, 2)`` of ``points`` ``(M, D)`` within ``within`` of each other whose
     ``frame`` numbers are 1 to ``max_gap`` apart (earlier first). Per gap one KD-tree
-    query against the points shifted by the gap (:func:`_frame_spaced`): a blob that sits
+    query against the points shifted by the gap (:func:`frame_spaced`): a blob that sits
     still over the take gives pairs with the few frames next to it, not with all of them."""
     from scipy.spatial import cKDTree
 
     if len(points) == 0:
         return np.zeros((0, 2), int)
-    tree = cKDTree(_frame_spaced(points, frame, within))
+    tree = cKDTree(frame_spaced(points, frame, within))
     out = []
     for gap in range(1, max_gap + 1):
-        later = cKDTree(_frame_spaced(points, frame - gap, within))
+        later = cKDTree(frame_spaced(points, frame - gap, within))
         pairs = tree.sparse_distance_matrix(later, within, output_type="ndarray")
         out.append(np.c_[pairs["i"], pairs["j"]])
     return np.concatenate(out).astype(int)
@@ -232,7 +224,7 @@ def _pairs_frames_apart(points, frame, within: float, max_gap: int) -> np.ndarra
 def _nearest_same_frame(tracked, frame, query, within: float) -> np.ndarray:
     """Distance from each ``query`` point ``(M, D)`` to the nearest of the ``tracked``
     points ``(F, N, D)`` (NaN: not tracked) of its own ``frame`` ``(M,)``; ``inf`` where
-    none lies within ``within``. One KD-tree over every frame (:func:`_frame_spaced`)."""
+    none lies within ``within``. One KD-tree over every frame (:func:`frame_spaced`)."""
     from scipy.spatial import cKDTree
 
     F, N, D = tracked.shape
@@ -240,8 +232,8 @@ def _nearest_same_frame(tracked, frame, query, within: float) -> np.ndarray:
     if not ok.any() or len(query) == 0:
         return np.full(len(query), np.inf)
     frames = np.broadcast_to(np.arange(F)[:, None], (F, N))
-    tree = cKDTree(_frame_spaced(tracked[ok], frames[ok], within, query))
-    dist, _ = tree.query(_frame_spaced(query, frame, within, tracked[ok]),
+    tree = cKDTree(frame_spaced(tracked[ok], frames[ok], within, query))
+    dist, _ = tree.query(frame_spaced(query, frame, within, tracked[ok]),
                          distance_upper_bound=within * (1 + 1e-9) + 1e-12)
     return dist
 
@@ -555,8 +547,8 @@ def release_other_markers_blobs(result: TrackResult, det: ClipDetections, cands:
         f, a, blob = f[blob >= 0], a[blob >= 0], blob[blob >= 0]
         seen = det.norm[k + 1][blob]
         within = EXPLAINED_PX / focal_px
-        dist, hit = cKDTree(_frame_spaced(predicted, g, within, seen)).query(
-            _frame_spaced(seen, f, within, predicted), distance_upper_bound=within)
+        dist, hit = cKDTree(frame_spaced(predicted, g, within, seen)).query(
+            frame_spaced(seen, f, within, predicted), distance_upper_bound=within)
         near = np.flatnonzero(np.isfinite(dist))
         track = mirror_track[cand[f, a], k]                                  # each measurement's mirror track
         near = near[np.isin(b[hit[near]].astype(np.int64) * n_tracks + track[near], claimed)]

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.camera import Camera
-from ..capture.views import ClipDetections
+from ..capture.views import ClipDetections, frame_spaced
 from ..geometry.epipolar import lines_of_normalised
 from ..geometry.mirror import MirrorPlane
 from .candidates import spans
@@ -279,9 +279,7 @@ def cut_at_splits(det: ClipDetections, view: int, ids: np.ndarray, radius_px: fl
     newborn = np.flatnonzero((frame == born[ids]) & (frame > 0))      # each track's first blob, after frame 0
     if newborn.size == 0:
         return ids
-    xy = det.xy[view]
-    stack = 10.0 * (np.ptp(xy) + 1.0)                                    # frames far apart: one tree
-    pts = np.c_[xy, frame * stack]
+    pts = frame_spaced(det.xy[view], frame, radius_px)                   # one tree for every frame
     near = cKDTree(pts[newborn]).sparse_distance_matrix(cKDTree(pts), radius_px, output_type="ndarray")
     b, o = newborn[near["i"]], near["j"].astype(int)
     split = (o != b) & (born[ids[o]] < frame[b]) & (det.colour[view][o] == det.colour[view][b])

@@ -221,7 +221,7 @@ def claimed_blobs(det: ClipDetections, blobs) -> list:
 def _tree_points(xy, frame, colour, focal_px: float) -> np.ndarray:
     """Pixel-scaled image points with the frame and colour class as far-apart extra
     coordinates: one KD-tree then serves every frame and class. (The idea of
-    ``late._frame_spaced``, with a fixed spacing: the trees here are cached and queried by many
+    ``capture.views.frame_spaced``, with a fixed spacing: the trees here are cached and queried by many
     point sets, so the spacing cannot depend on the points of one query.)"""
     return np.column_stack([np.asarray(xy, float) * focal_px, np.asarray(frame, float) * COLOUR_SPACING_MM,
                             np.asarray(colour, float) * COLOUR_SPACING_MM])
