@@ -165,10 +165,10 @@ def track(args) -> int:
               f"{np.mean(pf['false_tracking']):.2f} false tracking, {np.mean(pf['conflicts']):.2f} conflicts, "
               f"{np.mean(pf['withheld']):.1f} conjectures withheld; "
               f"tracking {report['timings_s']['tracking_frames_per_s']:.0f} frames/s")
-        repaired, doubted = (int(np.sum(pf.get(key, 0))) for key in ("repaired", "doubted"))
+        repaired, doubted, merged = (int(np.sum(pf.get(key, 0))) for key in ("repaired", "doubted", "merged_images"))
         if repaired or doubted:
-            print(f"  measurements from one mirror that their neighbours disowned: {repaired} re-paired onto another "
-                  f"mirror image, {doubted} left to the gap fill")
+            print(f"  measurements from one mirror disowned: {repaired} re-paired onto another mirror image, {doubted} "
+                  f"left to the gap fill" + (f" ({merged} of them through one blob of two dots' images)" if merged else ""))
         for text in report["warnings"]:
             print(f"  warning: {text}")
     return 0

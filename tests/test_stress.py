@@ -381,9 +381,10 @@ def _tracked_stress_clip(name, tmp_path, capsys):
                            "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json"], capsys)
     assert code == 0, err
     per_frame = json.loads((tmp_path / "take.json").read_text())["per_frame"]
-    repaired, doubted = sum(per_frame["repaired"]), sum(per_frame["doubted"])
+    repaired, doubted, merged = (sum(per_frame[k]) for k in ("repaired", "doubted", "merged_images"))
     line = f"disowned: {repaired} re-paired onto another mirror image, {doubted} left to the gap fill"
     assert (line in out) == bool(repaired or doubted)   # the command says what the gap fill re-paired or doubted
+    assert (f"({merged} of them through one blob of two dots' images)" in out) == bool(merged)
     assert f"{np.mean(per_frame['bridged']):.1f} bridged along their 2D tracks" in out   # and what the bridge measured
     return scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
 
@@ -433,7 +434,7 @@ def test_a_fast_dots_gap_bracketed_by_its_2d_tracks_is_measured(tmp_path, capsys
     assert abs(ratio_error) < 0.002
 
 
-@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.99), ("dense", 2, 0.99)])
+@pytest.mark.parametrize("name, over_2mm, reported", [("fast720", 20, 0.99), ("dense", 0, 0.99)])
 def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, reported):
     """#18, stop 32: two touching dots made one blob, centred between them. On fast720 (held out,
     expressions 2.2x as fast) one label sat on such a blob of two dots at the silhouette, 3-4 mm off
@@ -444,7 +445,10 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
     2 mm, 97.5 % reported (95.7 %). Since stop 34 dense's single-mirror measurements that their
     neighbours disown are re-paired onto the dot's own image or conjectured
     (``gapfill.doubt_outlying_measurements``): 8 -> 1 point over 2 mm. Stop 35: fast720 97.7 -> 99.6 % with the
-    clip's 2D tracks linked within 0.8 of the blob spacing (``pairing.clip_link_gate_px``)."""
+    clip's 2D tracks linked within 0.8 of the blob spacing (``pairing.clip_link_gate_px``). Stop 37: a
+    single-mirror measurement through a mirror blob of twice its typical dot's area is doubted
+    (``gapfill.MERGED_AREA``): dense's last point over 2 mm (2.003 mm, dot 192's grazing image run into
+    its neighbour's) is gone, 1 -> 0."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["rms_mm"] < 0.3
@@ -452,6 +456,19 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
     assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
     assert s["seen_reported_fraction"] > reported
     assert abs(ratio_error) < 0.002
+
+
+def test_a_mirror_blob_of_two_dots_images_does_not_measure_a_marker(tmp_path, capsys):
+    """#18, stop 37, webcam (640x360, 120 dots of 3.5 mm): two dots, 67 and 82, were measured through mirror
+    0 for tens of frames in blobs that their grazing neighbours' images had run into, up to 4.5 mm off --
+    57 points over 2 mm, too smoothly for their neighbours' relations to disown them. A single-mirror
+    measurement through a blob of twice its typical dot's area is now doubted and conjectured
+    (``gapfill.MERGED_AREA``): 26 points over 2 mm, 0.35 mm RMS (0.40); 97.4 % of the seen marker-frames
+    reported (98.4 %: the conjectures of the longest such stretches are expected too far off and withheld)."""
+    s, report, ratio_error = _tracked_stress_clip("webcam", tmp_path, capsys)
+    assert sum(report["per_frame"]["merged_images"]) >= 20
+    _holds_on_a_held_out_clip(s, report, ratio_error, 0.97, 30)
+    assert s["rms_mm"] < 0.37
 
 
 @pytest.mark.parametrize("held_frames", [5, 10 ** 9])

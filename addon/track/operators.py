@@ -66,11 +66,12 @@ class _TrackInputs:
 
             import_take(context, take)
         pf = report["per_frame"]  # the run's warnings (undecided markers, ...) follow from the message log
-        repaired, doubted = (int(np.sum(pf.get(key, 0))) for key in ("repaired", "doubted"))
+        repaired, doubted, merged = (int(np.sum(pf.get(key, 0))) for key in ("repaired", "doubted", "merged_images"))
         return (f"{report['markers']['count']} markers over {report['frames']['count']} frames -> {take.name}; "
                 f"{np.mean(pf['measured']):.1f} measured, {np.mean(pf['conjectured']):.1f} conjectured per frame"
                 + (f"; {repaired} one-mirror measurements re-paired, {doubted} left to the gap fill"
-                   if repaired or doubted else ""))
+                   if repaired or doubted else "")
+                + (f" ({merged} through one blob of two dots' images)" if merged else ""))
 
 
 class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):

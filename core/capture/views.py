@@ -26,12 +26,15 @@ def frame_spaced(points, frame, within: float, *extent) -> np.ndarray:
 
 @dataclass
 class FrameDets:
-    """One frame's detections per view (pixels, colour-class indices)."""
+    """One frame's detections per view (pixels, colour-class indices; blob areas in pixels where
+    the detector gives them, else None)."""
 
     direct: np.ndarray
     direct_color: np.ndarray
     mirror: list = field(default_factory=list)
     mirror_color: list = field(default_factory=list)
+    direct_area: np.ndarray = None
+    mirror_area: list = None
 
 
 @dataclass
@@ -40,8 +43,9 @@ class ClipDetections:
     1..K: mirrors), each sorted by frame: pixels ``xy`` ``(D, 2)``, undistorted
     normalised coordinates ``norm`` ``(D, 2)`` (one ``Camera.normalize`` call per view
     for the clip), colour classes ``colour`` ``(D,)``, ``frame`` ``(D,)`` and the offsets
-    ``start`` ``(F + 1,)``: frame ``f`` of view ``v`` is ``start[v][f]:start[v][f + 1]``.
-    A detection's index in its view is its *global* blob index."""
+    ``start`` ``(F + 1,)``: frame ``f`` of view ``v`` is ``start[v][f]:start[v][f + 1]``;
+    ``area`` ``(D,)`` the blobs' areas in pixels, or None where the detections carry none (the
+    add-on's 2D tracks). A detection's index in its view is its *global* blob index."""
 
     n_frames: int
     xy: list
@@ -49,6 +53,7 @@ class ClipDetections:
     colour: list
     frame: list
     start: list
+    area: list = None
 
     @classmethod
     def from_frames(cls, frames, camera) -> "ClipDetections":
@@ -57,6 +62,8 @@ class ClipDetections:
         F = len(frames)
         K = len(frames[0].mirror) if F else 0
         xy, norm, colour, frame, start = [], [], [], [], []
+        with_area = F > 0 and all(getattr(f, "direct_area", None) is not None for f in frames)
+        area = [] if with_area else None
         for v in range(K + 1):
             pos = [np.asarray(f.direct if v == 0 else f.mirror[v - 1], float).reshape(-1, 2) for f in frames]
             col = [np.asarray(f.direct_color if v == 0 else f.mirror_color[v - 1], int).reshape(-1) for f in frames]
@@ -66,7 +73,10 @@ class ClipDetections:
             colour.append(np.concatenate(col) if F else np.zeros(0, int))
             frame.append(np.repeat(np.arange(F), counts))
             start.append(np.r_[0, np.cumsum(counts)])
-        return cls(F, xy, norm, colour, frame, start)
+            if with_area:
+                area.append(np.concatenate([np.asarray(f.direct_area if v == 0 else f.mirror_area[v - 1], float)
+                                            .reshape(-1) for f in frames]))
+        return cls(F, xy, norm, colour, frame, start, area)
 
     @classmethod
     def of(cls, frames, camera) -> "ClipDetections":
@@ -107,7 +117,8 @@ class ClipDetections:
         cut = [slice(x, y) for x, y in zip(lo, hi)]
         return ClipDetections(b - a, [v[c] for v, c in zip(self.xy, cut)], [v[c] for v, c in zip(self.norm, cut)],
                               [v[c] for v, c in zip(self.colour, cut)], [v[c] - a for v, c in zip(self.frame, cut)],
-                              [s[a:b + 1] - x for s, x in zip(self.start, lo)])
+                              [s[a:b + 1] - x for s, x in zip(self.start, lo)],
+                              None if self.area is None else [v[c] for v, c in zip(self.area, cut)])
 
     def frame_view(self, f: int, v: int) -> slice:
         return slice(int(self.start[v][f]), int(self.start[v][f + 1]))
@@ -116,6 +127,27 @@ class ClipDetections:
         """View ``v``'s ``what`` (``"xy"``, ``"norm"`` or ``"colour"``) as a list over
         frames (array views, no copies)."""
         return np.split(getattr(self, what)[v], self.start[v][1:-1])
+
+    def area_share(self, v: int, blobs=None) -> np.ndarray | None:
+        """The area of each blob of view ``v`` (or of those indexed by ``blobs``) over its typical dot's
+        there: the median area of its :data:`.markers.NEIGHBOUR_BLOBS` nearest blobs of the frame (itself
+        included), as the detector reads it (:func:`.markers.local_typical_area`: a mirror's images are
+        smaller than the direct view's, and shrink towards the face's edge). About 1 for a dot, 1.5-2.5
+        for two dots' images run into one blob. None without areas."""
+        from scipy.spatial import cKDTree
+
+        from .markers import NEIGHBOUR_BLOBS
+
+        if self.area is None:
+            return None
+        area = self.area[v]
+        blobs = np.arange(area.size) if blobs is None else np.asarray(blobs, int)
+        k = min(NEIGHBOUR_BLOBS, area.size)    # (a frame of fewer blobs borrows the nearest frame's)
+        if k < 2 or blobs.size == 0:
+            return np.ones(blobs.size)
+        points = frame_spaced(self.xy[v], self.frame[v], 0.0)                  # one tree for every frame
+        _, near = cKDTree(points).query(points[blobs], k=k)
+        return area[blobs] / np.maximum(np.median(area[near], axis=1), 1e-9)
 
     def counts(self, v: int) -> np.ndarray:
         """Detections per frame in view ``v`` ``(F,)``."""

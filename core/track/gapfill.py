@@ -1,7 +1,8 @@
 """The tracker's offline gap filling (Lin 2003, eq. 5.8, with the whole take known): every gap of a
 tracked take conjectured from the marker's learned neighbour relations, met with its measurements at
 both ends, and withheld where it is expected too far off (:func:`fill_gaps`); before it, measurements
-those relations say are wrongly paired are made gaps (:func:`doubt_outlying_measurements`)."""
+those relations say are wrongly paired, and those through a mirror blob of two dots' images, are made gaps
+(:func:`doubt_outlying_measurements`)."""
 
 from __future__ import annotations
 
@@ -26,10 +27,16 @@ OUTLIER_MIN_MM = 1.5
 #: at 1.5 sd
 REPAIR_SD = 2.0
 REPAIR_MIN_MM = 1.0
+#: ... and one whose mirror blob has this many times its typical dot's area (ClipDetections.area_share) is doubted
+#: however near its estimate: two dots' images run into one blob where the mirror sees the face at a grazing angle,
+#: and its centre lies between them, the point 1-4 mm along the direct ray. Over 17 clips points over 2 mm
+#: 194 -> 161 (dense 1 -> 0, webcam 57 -> 26; yaw540 0 -> 2: neighbours' conjectures without the measurement);
+#: at 1.5 (dense's merged images measure 1.5-2.4) 177, at 2.5 184
+MERGED_AREA = 2.0
 
 
 def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=None, learned_neighbours: int = 12,
-                                ridge_mm2: float = 1.0, min_frames: int = 10) -> TrackResult:
+                                ridge_mm2: float = 1.0, min_frames: int = 10, det=None) -> TrackResult:
     """A measurement from the direct view and one mirror is only as good as its pairing: the mirror
     blob may be another dot's image on the same epipolar band (two grazing images merged, or a
     neighbour's image beside the dot's hidden one), which puts the point 2-3 mm along the direct
@@ -42,12 +49,16 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
     ``cands`` (:class:`.candidates.ClipCandidates`), one more than :data:`REPAIR_SD` sd off is
     re-paired where another candidate of its direct blob -- a mirror blob in the band that no other
     marker takes in the frame -- lies within half its distance of the estimate and within
-    :data:`REPAIR_SD` sd (:func:`_repair_from_rivals`). In place; ``stats["doubted"]`` and
-    ``stats["repaired"]`` count the measurements doubted and re-paired per frame."""
+    :data:`REPAIR_SD` sd (:func:`_repair_from_rivals`). With the clip's detections ``det`` (and their
+    areas), a measurement through a mirror blob of :data:`MERGED_AREA` times its frame's median blob is
+    doubted whatever its distance (:func:`through_merged_blob`). In place; ``stats["doubted"]`` and
+    ``stats["repaired"]`` count the measurements doubted and re-paired per frame, ``stats["merged_images"]``
+    the doubted ones through such a blob."""
     measured = result.assigned_blob >= 0
     single = (result.camera_mask == 3) | (result.camera_mask == 5)  # direct and one mirror
     result.stats["doubted"] = np.zeros(measured.shape[0], int)
     result.stats["repaired"] = np.zeros(measured.shape[0], int)
+    result.stats["merged_images"] = np.zeros(measured.shape[0], int)
     rows = np.flatnonzero((measured & single).any(axis=0))
     if rows.size == 0:
         return result
@@ -67,6 +78,10 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
         np.add.at(result.stats["repaired"], f[fixed], 1)
     with np.errstate(invalid="ignore"):
         doubt = (measured & single)[:, rows] & (off > np.maximum(OUTLIER_MIN_MM, OUTLIER_SD * sd))
+    if det is not None and cands is not None:
+        merged = through_merged_blob(result, det, cands, measured & single)[:, rows]
+        result.stats["merged_images"] = merged.sum(axis=1)
+        doubt |= merged
     f, p = np.nonzero(doubt)
     m = rows[p]
     result.assigned_blob[f, m] = -1
@@ -77,6 +92,22 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
     result.head_frame[f, m] = result.neutral[m] + estimate[f, p]             # a gap: fill_gaps conjectures it
     result.stats["doubted"] = doubt.sum(axis=1)
     return result
+
+
+def through_merged_blob(result: TrackResult, det, cands, cells) -> np.ndarray:
+    """``(F, N)``: which of the measurements ``cells`` ``(F, N)`` take, through their candidate
+    (``result.candidate``, into the clip's candidates ``cands``), a mirror blob of at least
+    :data:`MERGED_AREA` times its typical dot's area (:meth:`..capture.views.ClipDetections.area_share`);
+    all False without areas."""
+    out = np.zeros(result.assigned_blob.shape, bool)
+    if det.area is None or result.candidate is None:
+        return out
+    f, m = np.nonzero(cells & (result.candidate >= 0))
+    blob = cands.mirror_blob[result.candidate[f, m]]                           # (n, K), -1: not in that mirror
+    for k in range(blob.shape[1]):
+        has = blob[:, k] >= 0
+        out[f[has], m[has]] |= det.area_share(k + 1, blob[has, k]) >= MERGED_AREA
+    return out
 
 
 def _repair_from_rivals(result: TrackResult, cands, frames, markers, expected_head, off, sd) -> np.ndarray:

@@ -66,7 +66,8 @@ def collect_detections(stream) -> tuple[list, list]:
         pick = [view == v for v in range(3)]
         xy = np.c_[det.x, det.y]
         frames.append(FrameDets(direct=xy[pick[0]], direct_color=det.color[pick[0]],
-                                mirror=[xy[pick[1]], xy[pick[2]]], mirror_color=[det.color[pick[1]], det.color[pick[2]]]))
+                                mirror=[xy[pick[1]], xy[pick[2]]], mirror_color=[det.color[pick[1]], det.color[pick[2]]],
+                                direct_area=det.area[pick[0]], mirror_area=[det.area[pick[1]], det.area[pick[2]]]))
         numbers.append(n)
     return numbers, frames
 

@@ -287,7 +287,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         result = merge_split_labels(result, s)  # the followed dots steady the earlier marker's conjecture
     result = release_other_markers_blobs(result, det, cands, normals, ds, camera.focal_px, tracks)
     result = settle_lost_markers(result, lost, s.gate_mm)
-    result = doubt_outlying_measurements(result, s.neighbour_radius_mm, cands)
+    result = doubt_outlying_measurements(result, s.neighbour_radius_mm, cands, det=det)
     conjecture, expected = fill_gaps(result, s.neighbour_radius_mm, max_sd_mm=s.conjecture_max_sd_mm)
     if s.single_views:
         measure_in_single_views(result, det, cands, normals, ds, camera.focal_px, conjecture, expected, s, limit)
