@@ -447,7 +447,7 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
     (``gapfill.doubt_outlying_measurements``): 8 -> 1 point over 2 mm. Stop 35: fast720 97.7 -> 99.6 % with the
     clip's 2D tracks linked within 0.8 of the blob spacing (``pairing.clip_link_gate_px``). Stop 37: a
     single-mirror measurement through a mirror blob of twice its typical dot's area is doubted
-    (``gapfill.MERGED_AREA``): dense's last point over 2 mm (2.003 mm, dot 192's grazing image run into
+    (``capture.views.MERGED_SHARE``): dense's last point over 2 mm (2.003 mm, dot 192's grazing image run into
     its neighbour's) is gone, 1 -> 0."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
@@ -461,14 +461,16 @@ def test_touching_dots_are_measured_apart(tmp_path, capsys, name, over_2mm, repo
 def test_a_mirror_blob_of_two_dots_images_does_not_measure_a_marker(tmp_path, capsys):
     """#18, stop 37, webcam (640x360, 120 dots of 3.5 mm): two dots, 67 and 82, were measured through mirror
     0 for tens of frames in blobs that their grazing neighbours' images had run into, up to 4.5 mm off --
-    57 points over 2 mm, too smoothly for their neighbours' relations to disown them. A single-mirror
-    measurement through a blob of twice its typical dot's area is now doubted and conjectured
-    (``gapfill.MERGED_AREA``): 26 points over 2 mm, 0.35 mm RMS (0.40); 97.4 % of the seen marker-frames
-    reported (98.4 %: the conjectures of the longest such stretches are expected too far off and withheld)."""
+    57 points over 2 mm, too smoothly for their neighbours' relations to disown them. No marker is now
+    measured through a mirror blob of twice its typical dot's area (``capture.views.MERGED_SHARE``): the
+    gap fill doubts such a measurement and conjectures it, and neither the following of dots through gaps
+    nor the single-view step takes such a blob. 21 points over 2 mm (26 with the doubt alone), 0.34 mm RMS
+    (0.40); 97.2 % of the seen marker-frames reported (98.4 %: the conjectures of the longest such stretches
+    are expected too far off and withheld)."""
     s, report, ratio_error = _tracked_stress_clip("webcam", tmp_path, capsys)
     assert sum(report["per_frame"]["merged_images"]) >= 20
-    _holds_on_a_held_out_clip(s, report, ratio_error, 0.97, 30)
-    assert s["rms_mm"] < 0.37
+    _holds_on_a_held_out_clip(s, report, ratio_error, 0.97, 24)
+    assert s["rms_mm"] < 0.36
 
 
 @pytest.mark.parametrize("held_frames", [5, 10 ** 9])

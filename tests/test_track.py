@@ -570,12 +570,12 @@ def test_a_single_mirror_measurement_through_a_blob_of_two_dots_images_becomes_a
     """#18, stop 37, dense clip: dot 192's image grazing in mirror 1 ran into its neighbour's for five
     frames at a time; the blob's centre lay between the two images and the point 1.4-2.0 mm along the
     direct ray, each frame within its neighbours' estimate (2.4 sd at most). A direct + one-mirror
-    measurement through a mirror blob of MERGED_AREA times its typical dot's area is doubted however near
+    measurement through a mirror blob of MERGED_SHARE times its typical dot's area is doubted however near
     its estimate and conjectured on its neighbours' motion; one through both mirrors is kept (the two
     depths check each other), and so is everything when the detections carry no areas."""
-    from mirrorcap.core.capture.views import ClipDetections
+    from mirrorcap.core.capture.views import MERGED_SHARE, ClipDetections
     from mirrorcap.core.track.candidates import ClipCandidates
-    from mirrorcap.core.track.gapfill import MERGED_AREA, doubt_outlying_measurements, fill_gaps
+    from mirrorcap.core.track.gapfill import doubt_outlying_measurements, fill_gaps
 
     rng = np.random.default_rng(7)
     N, F = 40, 120
@@ -590,7 +590,7 @@ def test_a_single_mirror_measurement_through_a_blob_of_two_dots_images_becomes_a
     cands = ClipCandidates(truth.reshape(-1, 3), blob, mirror, np.zeros(F * N), frame, np.arange(F + 1) * N)
     own = blob.reshape(F, N)
     area = np.full(F * N, 12.0)
-    area[own[60:63, [5, 7]].ravel()] = 12.0 * MERGED_AREA * 1.1        # markers 5 and 7: two images in one blob
+    area[own[60:63, [5, 7]].ravel()] = 12.0 * MERGED_SHARE * 1.1        # markers 5 and 7: two images in one blob
     xy = np.c_[np.tile(neutral[:, :2] * 2.0, (F, 1))]                  # each frame's blobs where its dots are
     views = [xy, xy, xy]
     det = ClipDetections(F, views, [v / 1000.0 for v in views], [np.zeros(F * N, int)] * 3, [frame] * 3,

@@ -6,7 +6,8 @@ as flat arrays per view -- pixels, colour classes, frames and the *normalised ca
 coordinates (Lin 2003, ch. 3: undistorted, ``f = 1``) from one
 :meth:`core.geometry.camera.Camera.normalize` call per view. Self-calibration, pairing,
 the 3D candidates and the tracker all read ``norm`` from it; none of them undistorts
-pixels again.
+pixels again. Where the detector gives them, it keeps the blobs' areas too, from which the
+tracker knows a mirror blob of two dots' images (:meth:`ClipDetections.merged`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+
+#: a blob of at least this many times its typical dot's area (ClipDetections.area_share) is taken for two dots'
+#: images run into one, where a mirror sees the face at a grazing angle: its centre lies between them, and a point
+#: measured through it 1-4 mm along the direct ray. The tracker measures no marker through such a mirror blob
+#: (track.gapfill, track.singleview). Over 17 stress clips points over 2 mm 194 -> 156 (dense 1 -> 0, webcam
+#: 57 -> 21). With the gap fill's doubt alone: 161 at 2.0, 160 at 1.7, 177 at 1.5 (dense's merged images measure
+#: 1.5-2.4, single ones 0.8-1.2), 184 at 2.5
+MERGED_SHARE = 2.0
 
 
 def frame_spaced(points, frame, within: float, *extent) -> np.ndarray:
@@ -148,6 +158,15 @@ class ClipDetections:
         points = frame_spaced(self.xy[v], self.frame[v], 0.0)                  # one tree for every frame
         _, near = cKDTree(points).query(points[blobs], k=k)
         return area[blobs] / np.maximum(np.median(area[near], axis=1), 1e-9)
+
+    def merged(self, v: int, blobs=None) -> np.ndarray:
+        """Which blobs of view ``v`` (or of those indexed by ``blobs``) are two dots' images run into one:
+        at least :data:`MERGED_SHARE` times their typical dot's area (:meth:`area_share`). All False
+        without areas."""
+        share = self.area_share(v, blobs)
+        if share is None:
+            return np.zeros(len(self.frame[v]) if blobs is None else np.size(blobs), bool)
+        return share >= MERGED_SHARE
 
     def counts(self, v: int) -> np.ndarray:
         """Detections per frame in view ``v`` ``(F,)``."""

@@ -27,12 +27,6 @@ OUTLIER_MIN_MM = 1.5
 #: at 1.5 sd
 REPAIR_SD = 2.0
 REPAIR_MIN_MM = 1.0
-#: ... and one whose mirror blob has this many times its typical dot's area (ClipDetections.area_share) is doubted
-#: however near its estimate: two dots' images run into one blob where the mirror sees the face at a grazing angle,
-#: and its centre lies between them, the point 1-4 mm along the direct ray. Over 17 clips points over 2 mm
-#: 194 -> 161 (dense 1 -> 0, webcam 57 -> 26; yaw540 0 -> 2: neighbours' conjectures without the measurement);
-#: at 1.5 (dense's merged images measure 1.5-2.4) 177, at 2.5 184
-MERGED_AREA = 2.0
 
 
 def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=None, learned_neighbours: int = 12,
@@ -50,10 +44,10 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
     re-paired where another candidate of its direct blob -- a mirror blob in the band that no other
     marker takes in the frame -- lies within half its distance of the estimate and within
     :data:`REPAIR_SD` sd (:func:`_repair_from_rivals`). With the clip's detections ``det`` (and their
-    areas), a measurement through a mirror blob of :data:`MERGED_AREA` times its frame's median blob is
-    doubted whatever its distance (:func:`through_merged_blob`). In place; ``stats["doubted"]`` and
-    ``stats["repaired"]`` count the measurements doubted and re-paired per frame, ``stats["merged_images"]``
-    the doubted ones through such a blob."""
+    areas), a measurement through a mirror blob of two dots' images (:data:`..capture.views.MERGED_SHARE`
+    times its typical dot's area) is doubted whatever its distance (:func:`through_merged_blob`). In place;
+    ``stats["doubted"]`` and ``stats["repaired"]`` count the measurements doubted and re-paired per frame,
+    ``stats["merged_images"]`` the doubted ones through such a blob."""
     measured = result.assigned_blob >= 0
     single = (result.camera_mask == 3) | (result.camera_mask == 5)  # direct and one mirror
     result.stats["doubted"] = np.zeros(measured.shape[0], int)
@@ -96,9 +90,8 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
 
 def through_merged_blob(result: TrackResult, det, cands, cells) -> np.ndarray:
     """``(F, N)``: which of the measurements ``cells`` ``(F, N)`` take, through their candidate
-    (``result.candidate``, into the clip's candidates ``cands``), a mirror blob of at least
-    :data:`MERGED_AREA` times its typical dot's area (:meth:`..capture.views.ClipDetections.area_share`);
-    all False without areas."""
+    (``result.candidate``, into the clip's candidates ``cands``), a mirror blob of two dots' images
+    (:meth:`..capture.views.ClipDetections.merged`); all False without areas."""
     out = np.zeros(result.assigned_blob.shape, bool)
     if det.area is None or result.candidate is None:
         return out
@@ -106,7 +99,7 @@ def through_merged_blob(result: TrackResult, det, cands, cells) -> np.ndarray:
     blob = cands.mirror_blob[result.candidate[f, m]]                           # (n, K), -1: not in that mirror
     for k in range(blob.shape[1]):
         has = blob[:, k] >= 0
-        out[f[has], m[has]] |= det.area_share(k + 1, blob[has, k]) >= MERGED_AREA
+        out[f[has], m[has]] |= det.merged(k + 1, blob[has, k])
     return out
 
 

@@ -8,7 +8,7 @@ gate), the take holds a conjecture from the neighbours (eq. 5.8, learned relatio
 ``gapfill.fill_gaps``), or a gap where that conjecture was expected too far off. Once the
 whole take is known, the conjecture predicts where the dot must appear in each view; an
 unclaimed blob of the marker's colour there, unambiguously nearer this marker than any
-other, measures it:
+other and not a mirror blob of two dots' images (``capture.views.MERGED_SHARE``), measures it:
 
 * in two views (direct and a mirror): the point nearest both rays (the reconstruction of
   eq. 3.10-3.12 by least squares), kept when the rays meet as closely as the take's own
@@ -293,6 +293,9 @@ def measure_in_single_views(result: TrackResult, det: ClipDetections, cands, nor
         hit = ok & (d <= gate)
         # the blob must be clearly this marker's: much nearer its image than any other marker's
         b = idx[np.minimum(j, idx.size - 1)]
+        if v > 0:    # a mirror blob of two dots' images measures neither (its centre lies between them)
+            rows = np.flatnonzero(hit)
+            hit[rows] = ~det.merged(v, b[rows])
         blob_xy = _tree_points(det.norm[v][b], det.frame[v][b], np.zeros(b.size), focal_px)
         d_b, j_b = other_tree.query(blob_xy, k=2, distance_upper_bound=AMBIGUITY_RATIO * MAX_GATE_PX + 1.0)
         j_b = np.minimum(j_b, max(int(seen.sum()) - 1, 0))
@@ -471,6 +474,8 @@ def _follow_once(result: TrackResult, det: ClipDetections, cands, normals, ds, f
                 j0 = np.minimum(j[:, 0], len(det.frame[v]) - 1)
                 linked = (d[:, 0] <= radius[v]) & (d[:, 1] >= LINK_RATIO * d[:, 0])
                 ok = linked & ~claimed[v][j0]
+                if v > 0:    # a mirror blob of two dots' images measures neither
+                    ok[ok] = ~det.merged(v, j0[ok])
                 new_blob[np.flatnonzero(want)[ok], v] = j0[ok]
                 if v == 0:   # the dot is another label's measurement: a split, if they never meet
                     a, b = marker[want], owner[j0]
