@@ -551,6 +551,19 @@ def test_stop_36s_held_out_clips(tmp_path, capsys, name, reported, over_2mm):
     _holds_on_a_held_out_clip(*_tracked_stress_clip(name, tmp_path, capsys), reported, over_2mm)
 
 
+def test_stop_37s_held_out_clip(tmp_path, capsys):
+    """#18, stop 37: cam450 (800x450, 150 dots of 3.2 mm, mirrors at 46 deg, +-12 deg yaw, expressions 1.6x as
+    fast), rendered to check the stop's change -- no marker measured through a mirror blob of two dots'
+    images -- and tuned on by nothing: 42 points over 2 mm with it and without it, 96.9 % of the seen
+    marker-frames reported (97.0 % without), no switch, no split label. Its worst label (38 points, up to
+    6.8 mm) is a phantom: dot 54, seen only directly, paired with the images of dots 53 and 112, both grazing
+    in mirror 0 and merged into a blob of a typical dot's area, 6-7 px from where dot 54's image would be.
+    The bounds hold what was measured (the done-when is 99 % and no point over 2 mm)."""
+    s, report, ratio_error = _tracked_stress_clip("cam450", tmp_path, capsys)
+    _holds_on_a_held_out_clip(s, report, ratio_error, 0.965, 45)
+    assert s["rms_mm"] < 0.48
+
+
 def test_a_late_markers_rest_is_read_from_its_earliest_stretch(tmp_path, capsys):
     """#18, stop 36, tilt630 (1120x630, 210 dots, +-13 deg yaw, +-6 deg roll): dot 77, undecided in the
     first frames, became a late marker from two stretches of its dots (frames 0-10, and from frame 50). Its

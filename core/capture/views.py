@@ -151,13 +151,22 @@ class ClipDetections:
         if self.area is None:
             return None
         area = self.area[v]
-        blobs = np.arange(area.size) if blobs is None else np.asarray(blobs, int)
+        blobs = np.arange(area.size) if blobs is None else np.asarray(blobs, int).reshape(-1)
         k = min(NEIGHBOUR_BLOBS, area.size)    # (a frame of fewer blobs borrows the nearest frame's)
-        if k < 2 or blobs.size == 0:
+        if k < 2:
             return np.ones(blobs.size)
-        points = frame_spaced(self.xy[v], self.frame[v], 0.0)                  # one tree for every frame
-        _, near = cKDTree(points).query(points[blobs], k=k)
-        return area[blobs] / np.maximum(np.median(area[near], axis=1), 1e-9)
+        # the tracker's steps ask about a few blobs at a time, again and again: one tree per view, each
+        # blob's share computed once
+        cache = self.__dict__.setdefault("_area_share", {})
+        if v not in cache:
+            points = frame_spaced(self.xy[v], self.frame[v], 0.0)              # one tree for every frame
+            cache[v] = (cKDTree(points), points, np.full(area.size, np.nan))
+        tree, points, share = cache[v]
+        todo = np.unique(blobs[np.isnan(share[blobs])])
+        if todo.size:
+            _, near = tree.query(points[todo], k=k, workers=-1)
+            share[todo] = area[todo] / np.maximum(np.median(area[near], axis=1), 1e-9)
+        return share[blobs]
 
     def merged(self, v: int, blobs=None) -> np.ndarray:
         """Which blobs of view ``v`` (or of those indexed by ``blobs``) are two dots' images run into one:
