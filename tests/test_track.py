@@ -511,6 +511,15 @@ def test_a_view_sees_a_dot_face_on_within_the_angle_of_its_surface_normal():
     assert not seen_face_on(np.full(3, np.nan), points[centre], cams, 80.0).any()
 
 
+def _waving_face(rng, N, F):
+    """``N`` markers on a shallow face 600 mm away and their motion over ``F`` frames, the head still: one
+    wave of expression that each marker follows with its own gain. Returns ``neutral (N, 3)``, ``truth (F, N, 3)``."""
+    neutral = rng.uniform(-30, 30, (N, 3)) * [1, 1, 0.2] + [0, 0, 600]
+    gain = 1.0 + 0.5 * (neutral[:, :1] / 30.0)
+    wave = np.sin(np.linspace(0, 3 * np.pi, F))[:, None, None] * np.array([0.0, 3.0, 1.0])
+    return neutral, neutral[None] + gain[None] * wave
+
+
 def test_a_single_mirror_measurement_its_neighbours_disown_becomes_a_conjecture():
     """#18, dense clip: a dot seen directly paired with another dot's grazing mirror image (their images
     merged) lands 2-3 mm along the direct ray for a frame or a few, a move no neighbour makes. The gap
@@ -523,10 +532,7 @@ def test_a_single_mirror_measurement_its_neighbours_disown_becomes_a_conjecture(
 
     rng = np.random.default_rng(5)
     N, F = 40, 120
-    neutral = rng.uniform(-30, 30, (N, 3)) * [1, 1, 0.2] + [0, 0, 600]
-    gain = 1.0 + 0.5 * (neutral[:, :1] / 30.0)
-    wave = np.sin(np.linspace(0, 3 * np.pi, F))[:, None, None] * np.array([0.0, 3.0, 1.0])
-    truth = neutral[None] + gain[None] * wave                            # (F, N, 3), head still
+    neutral, truth = _waving_face(rng, N, F)
     take = _labelled_take(np.ones((F, N), bool), neutral, np.arange(F * N).reshape(F, N))
     take.points = truth + rng.normal(0, 0.05, truth.shape)
     take.points[:, 12] += rng.normal(0, 0.7, (F, 3))                    # a noisy marker: judged on its own sd
@@ -579,10 +585,7 @@ def test_a_single_mirror_measurement_through_a_blob_of_two_dots_images_becomes_a
 
     rng = np.random.default_rng(7)
     N, F = 40, 120
-    neutral = rng.uniform(-30, 30, (N, 3)) * [1, 1, 0.2] + [0, 0, 600]
-    gain = 1.0 + 0.5 * (neutral[:, :1] / 30.0)
-    wave = np.sin(np.linspace(0, 3 * np.pi, F))[:, None, None] * np.array([0.0, 3.0, 1.0])
-    truth = neutral[None] + gain[None] * wave
+    neutral, truth = _waving_face(rng, N, F)
     # one candidate per marker and frame: direct blob = mirror-0 blob = f * N + m (marker 5: mirror 1's too)
     blob = (np.arange(F)[:, None] * N + np.arange(N)[None]).reshape(-1)
     mirror = np.c_[blob, np.where(blob % N == 5, blob, -1)]
@@ -627,10 +630,7 @@ def test_a_measurement_its_neighbours_disown_is_re_paired_onto_its_dots_own_imag
 
     rng = np.random.default_rng(6)
     N, F = 40, 120
-    neutral = rng.uniform(-30, 30, (N, 3)) * [1, 1, 0.2] + [0, 0, 600]
-    gain = 1.0 + 0.5 * (neutral[:, :1] / 30.0)
-    wave = np.sin(np.linspace(0, 3 * np.pi, F))[:, None, None] * np.array([0.0, 3.0, 1.0])
-    truth = neutral[None] + gain[None] * wave
+    neutral, truth = _waving_face(rng, N, F)
     measured_points = truth + rng.normal(0, 0.05, truth.shape)
     # candidates: per frame one per marker (direct blob = mirror-0 blob = f * N + m), then marker 7's rival
     # in frames 60-62: its direct blob with another mirror blob at the true point (frame 62: marker 3's blob)
