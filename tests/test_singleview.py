@@ -71,7 +71,9 @@ def test_a_marker_seen_in_the_direct_view_only_is_refined_along_its_ray(performa
     # across the ray the dot's image fixes the point -- to the detections' noise, 0.1 px per axis --
     # where the conjecture was off by its own error; along the ray the depth is still the conjecture's
     noise_mm = 0.1 * np.sqrt(2.0) * np.median(truth[:, 2]) / rig.camera.focal_px
-    assert across_on < 1.2 * noise_mm and across_on < 0.6 * across_off, (noise_mm, across_off, across_on)
+    # (the conjectures themselves lay 0.114 mm off across the ray before stop 37 and 0.078 mm since: each relation
+    # now meets the marker's measurements on its own, motion.conjecture_gaps; the refinement gives 0.053 either way)
+    assert across_on < 1.2 * noise_mm and across_on < 0.75 * across_off, (noise_mm, across_off, across_on)
     assert abs(along_on - along_off) < 0.2 * along_off + 0.01, (along_off, along_on)
     print(f"across the ray {across_off:.3f} -> {across_on:.3f} mm (noise {noise_mm:.3f}), along {along_off:.3f} -> "
           f"{along_on:.3f} mm")

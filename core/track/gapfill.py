@@ -146,10 +146,11 @@ def fill_gaps(result: TrackResult, radius_mm: float, kc: float = 1.0, learned_ne
     1. Learned neighbour relations (:func:`core.track.motion.learned_conjectures`, eq. 5.8
        with each pair's relation fitted on the frames where both were measured; the
        ``learned_neighbours`` nearest within ``radius_mm``): a marker's motion at ``t``
-       from the neighbours measured at ``t``. The prediction's error where the marker
-       is measured, at the two ends of its gap, is blended linearly across the gap and
-       taken off, so the conjecture meets the measurements at both ends (at the one end
-       of a gap still open at the end of the take).
+       from the neighbours measured at ``t``. Each relation's error where the marker and
+       that neighbour were both measured is blended linearly across the frames between and
+       taken off, so the conjecture meets the measurements at both ends of a gap (at the one
+       end of a gap still open at the end of the take), whichever neighbours the gap keeps
+       (:func:`core.track.motion.conjecture_gaps`).
     2. Where no neighbour with a learned relation is measured: eq. 5.8 from both ends of
        the gap -- the marker's motion at its last measurement ``a`` plus its neighbours'
        motion since (eq. 5.8 weights), and the same from its next measurement ``b``,
