@@ -66,6 +66,12 @@ def hue_saturation(rgb) -> tuple:
     return np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b), 1.0 - 3.0 * np.minimum(np.minimum(r, g), b)
 
 
+def hue_apart(hue_a, hue_b) -> np.ndarray:
+    """The angle (radians, 0 to pi) between hue angles ``hue_a`` and ``hue_b`` (broadcast), across the
+    wrap at +-pi."""
+    return np.abs(np.angle(np.exp(1j * (np.asarray(hue_a) - np.asarray(hue_b)))))
+
+
 class ColorDotExtractor:
     """The normal-light extractor for a stream of same-sized frames: call it with an 8-bit BGR
     frame, get :class:`~.detections.Detections` (see the module text for the steps)."""
@@ -116,9 +122,7 @@ class ColorDotExtractor:
         # joined to a dot beside it pulled the blob's centre 8 px off (full HD: a blue dot at the jaw line
         # never tracked). Below twice min_value a pixel's hue is noise: there the test is left out (a dark
         # region cut into its noisy pieces gave the light clip a false dot at a view boundary)
-        hue, _ = hue_saturation(px[:, ::-1])
-        bg_hue, _ = hue_saturation(pb[:, ::-1])
-        from_skin = np.degrees(np.abs(np.angle(np.exp(1j * (hue - bg_hue)))))
+        from_skin = np.degrees(hue_apart(hue_saturation(px[:, ::-1])[0], hue_saturation(pb[:, ::-1])[0]))
         ok &= (from_skin >= FROM_SKIN_DEG) | (value < 2.0 * s.min_value)
         return idx[ok], contrast[ok], value[ok], px[ok], pb[ok]
 
@@ -158,9 +162,7 @@ class ColorDotExtractor:
         cx, cy, elongation, rgb, saturation = blob_shape(sums)          # columns 0-10 as the UV extractor's
         blob_contrast = np.linalg.norm(rgb - sums[:, 11:14] / sums[:, :1], axis=1)
         cls, hue_diff, _ = self.colors.by_hue(rgb)
-        hue, _ = hue_saturation(rgb)
-        bg_hue, _ = hue_saturation(sums[:, 11:14])
-        from_skin = np.degrees(np.abs(np.angle(np.exp(1j * (hue - bg_hue)))))
+        from_skin = np.degrees(hue_apart(hue_saturation(rgb)[0], hue_saturation(sums[:, 11:14])[0]))
         if s.max_hue_deg < 180.0:
             hue_ok = (hue_diff <= s.max_hue_deg) & (hue_diff < from_skin)
         else:                         # no classes yet (colors learn): any colour that is not the skin's

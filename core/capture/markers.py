@@ -162,13 +162,13 @@ class ColorClasses:
         the class whose samples' mean hue is nearest (hue: the angle of the colour about the grey
         axis, as in HSV; saturation ``1 - 3 min(r, g, b)`` of the normalised colour). Coloured
         dots keep their hue when the light on them changes or a mirror darkens them."""
-        from .colordots import hue_saturation
+        from .colordots import hue_apart, hue_saturation
 
         hue, sat = hue_saturation(rgb)
         s_hue, _ = hue_saturation(self.samples)
         k = np.arange(len(self.names))
         centre = np.angle(np.array([np.exp(1j * s_hue[self.labels == c]).mean() for c in k]))
-        diff = np.abs(np.angle(np.exp(1j * (hue[:, None] - centre[None]))))
+        diff = hue_apart(hue[:, None], centre[None])
         best = np.argmin(diff, axis=1) if diff.size else np.zeros(len(hue), int)
         return best, np.degrees(diff[np.arange(len(hue)), best]) if diff.size else np.zeros(0), sat
 
