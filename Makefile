@@ -134,7 +134,9 @@ stress-clips: $(STAMP)
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
 # (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps; and hd, held out (1920x1080,
 # medium skin, 180 dots of 3 mm, mirrors at 40 deg, +-14 deg yaw, 90 frames); med720, held out (1280x720, medium skin,
-# 170 dots of 2.8 mm, mirrors at 43 deg, +-12 deg yaw, 90 frames; rendered at stop 36). About 55 minutes.
+# 170 dots of 2.8 mm, mirrors at 43 deg, +-12 deg yaw, 90 frames; rendered at stop 36); tan720, held out (1280x720,
+# a tanned skin of sRGB 190,140,110, 190 dots of 2.7 mm, mirrors at 44 deg, +-12 deg yaw, 90 frames; rendered at
+# stop 38). About 65 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -146,4 +148,7 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin medium --out sample_scenes/normal/med720 --size 1280 720 \
 		--focal 1150 --markers 170 --marker-mm 2.8 --mirror-deg 43 --distance 640 --head-deg 10 12 5 --tempo 1.6 \
 		--frames 90 --samples 4 --seed 301 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 190,140,110 --out sample_scenes/normal/tan720 \
+		--size 1280 720 --focal 1100 --markers 190 --marker-mm 2.7 --mirror-deg 44 --distance 630 --head-deg 10 12 5 \
+		--tempo 1.8 --frames 90 --samples 4 --seed 411 --no-scan
 
