@@ -136,7 +136,8 @@ stress-clips: $(STAMP)
 # medium skin, 180 dots of 3 mm, mirrors at 40 deg, +-14 deg yaw, 90 frames); med720, held out (1280x720, medium skin,
 # 170 dots of 2.8 mm, mirrors at 43 deg, +-12 deg yaw, 90 frames; rendered at stop 36); tan720, held out (1280x720,
 # a tanned skin of sRGB 190,140,110, 190 dots of 2.7 mm, mirrors at 44 deg, +-12 deg yaw, 90 frames; rendered at
-# stop 38). About 65 minutes.
+# stop 38); deep720 (1280x720, a deep skin of sRGB 110,75,55, 200 dots of 2.6 mm, mirrors at 42 deg, +-12 deg yaw,
+# 90 frames; rendered at stop 38). About 75 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -151,4 +152,7 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 190,140,110 --out sample_scenes/normal/tan720 \
 		--size 1280 720 --focal 1100 --markers 190 --marker-mm 2.7 --mirror-deg 44 --distance 630 --head-deg 10 12 5 \
 		--tempo 1.8 --frames 90 --samples 4 --seed 411 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 110,75,55 --out sample_scenes/normal/deep720 \
+		--size 1280 720 --focal 1100 --markers 200 --marker-mm 2.6 --mirror-deg 42 --distance 640 --head-deg 8 12 4 \
+		--tempo 2.0 --frames 90 --samples 4 --seed 431 --no-scan
 

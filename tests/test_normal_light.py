@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -356,8 +357,10 @@ def test_re_solve_from_tracks_re_estimates_the_mirrors_and_rejects_a_wrong_corre
     assert s["identity_switches"] == 0 and s["max_mm"] < 2.0
 
 
-@pytest.mark.parametrize("name, rms_mm, reported, ratio", [("hd", 0.45, 0.935, 0.003), ("med720", 0.5, 0.94, 0.006)])
-def test_held_out_normal_light_clips(tmp_path, capsys, name, rms_mm, reported, ratio):
+@pytest.mark.parametrize("name, rms_mm, reported, ratio, over_2mm", [("hd", 0.33, 0.965, 0.004, 4),
+                                                                    ("med720", 0.4, 0.955, 0.006, 10),
+                                                                    ("deep720", 0.4, 0.955, 0.004, 12)])
+def test_held_out_normal_light_clips(tmp_path, capsys, name, rms_mm, reported, ratio, over_2mm):
     """Normal-light clips rendered after every setting here was chosen (`make normal-clips`). hd (1920x1080,
     medium skin, 180 dots of 3 mm, mirrors at 40 deg, +-14 deg yaw): no identity switch, the take within
     0.45 mm RMS after one similarity (measured 0.35), 92.5 % of the seen marker-frames reported; the mirror
@@ -367,7 +370,12 @@ def test_held_out_normal_light_clips(tmp_path, capsys, name, rms_mm, reported, r
     points over 2 mm, 0.53 mm RMS. Stop 36, a candidate pixel's hue must differ from the skin's
     (colordots.FROM_SKIN_DEG; the shadow of the skin's hue beside a dot moved it): hd 94.4 % and 0.27 mm,
     med720 94.7 % and 0.44 mm (37 points over 2 mm); 92.5 % and 93.1 % fail these bounds. med720's mirror
-    scales are linked 0.42 % off (0.26 % before the change; the agreement check passes either way)."""
+    scales are linked 0.42 % off (0.26 % before the change; the agreement check passes either way). Stop 38:
+    touching dots of two colours split (colordots.split_by_colour) and late rivals on one direct track
+    (late.RIVAL_ALONG_MM): hd 94.4 -> 97.7 % (2 -> 1 point over 2 mm, 0.26 mm RMS), med720 95.0 -> 96.2 %
+    (23 -> 6 points, 0.42 -> 0.35 mm); deep720 (a deep skin, 200 dots of 2.6 mm, mirrors at 42 deg; rendered at
+    stop 38 and used in choosing its changes) 92.5 -> 96.5 %, 103 -> 3 points, 0.66 -> 0.34 mm. The bounds
+    fail on the code before."""
 
     clip = ROOT / "sample_scenes" / "normal" / name
     code, _, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
@@ -379,6 +387,8 @@ def test_held_out_normal_light_clips(tmp_path, capsys, name, rms_mm, reported, r
     assert s["identity_switches"] == 0 and s["markers_tracked"] >= 100
     assert s["rms_mm"] < rms_mm
     assert s["seen_reported_fraction"] >= reported
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= over_2mm
 
 
 def test_a_dot_paired_with_a_like_dots_grazing_image_is_not_a_late_marker(tmp_path, capsys):
@@ -387,8 +397,10 @@ def test_a_dot_paired_with_a_like_dots_grazing_image_is_not_a_late_marker(tmp_pa
     epipolar lines; mirror 1 sees two of them as one blob at the nose's silhouette and not the third. Two late
     chains each paired a dot with a like dot's grazing image (its own hidden) -- 8-9 mm along its ray, off the
     face, but within the 10 mm that add_late_markers allowed: 53 points over 2 mm (up to 9.4 mm), 0.66 mm RMS. At
-    late.LATE_OFF_FACE_MM (7 mm) both are refused: 14 points, 0.39 mm RMS, at most 3.3 mm, the same 94.2 % of the
-    seen marker-frames reported, no switch."""
+    late.LATE_OFF_FACE_MM (7 mm) both are refused: 14 points, 0.39 mm RMS, at most 3.3 mm, 94.2 % of the seen
+    marker-frames reported. Then touching dots of two colours split (colordots.split_by_colour) found more dots
+    and with them more such chains, each on the direct 2D track of a chain kept, resting 6-8 mm from it along the
+    ray: of two such rivals the one nearer the face is kept (late.RIVAL_ALONG_MM): 96.8 %, 4 points, 0.33 mm."""
     clip = ROOT / "sample_scenes" / "normal" / "tan720"
     code, _, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
                          "--rig", clip / "rig.json", "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json",
@@ -400,8 +412,31 @@ def test_a_dot_paired_with_a_like_dots_grazing_image_is_not_a_late_marker(tmp_pa
     print(f"tan720: {over} points over 2 mm, RMS {s['rms_mm']:.3f} mm, max {s['max_mm']:.2f} mm, "
           f"{100 * s['seen_reported_fraction']:.1f} % reported")
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and abs(ratio_error) < 0.006
-    assert over <= 20 and s["max_mm"] < 5.0 and s["rms_mm"] < 0.45
-    assert s["seen_reported_fraction"] >= 0.935
+    assert over <= 8 and s["max_mm"] < 4.0 and s["rms_mm"] < 0.37
+    assert s["seen_reported_fraction"] >= 0.96
+
+def test_two_touching_dots_of_two_colours_are_two_dots():
+    """#18, stop 38: two dots of two colours touching in the image (at a mirror's grazing angle, or neighbours
+    foreshortened into each other) were one connected blob whose mean hue is neither's, which the hue test
+    dropped: both dots lost (tan720: 162 of its 308 unreported seen marker-frames had no mirror blob within
+    6 px). colordots.split_by_colour splits a blob where two classes' pixels sit SPLIT_APART_PX apart; a lone
+    dot, whose rim blended with the skin drifts towards the skin's hue all round, stays whole."""
+    green, magenta = (60, 175, 30), (160, 30, 215)
+    img = np.zeros((200, 200, 3), np.uint8)
+    img[:] = (110, 140, 190)                                            # a tanned skin (BGR)
+    yy, xx = np.mgrid[:200, :200]
+    img[(xx - 100) ** 2 + (yy - 100) ** 2 <= 12] = green               # two dots of ~3.5 px radius, touching
+    img[(xx - 106) ** 2 + (yy - 100) ** 2 <= 12] = magenta
+    img[(xx - 60) ** 2 + (yy - 60) ** 2 <= 12] = green                 # and one alone
+    img = cv2.GaussianBlur(img, (3, 3), 0.8)
+    classes = ColorClasses.default("normal")
+    det = marker_extractor(classes, ExtractionSettings(light="normal"))(img)
+    found = {(round(float(x)), round(float(y))): classes.names[c] for x, y, c in zip(det.x, det.y, det.color)}
+    assert found == {(60, 60): "green", (100, 100): "green", (106, 100): "magenta"}
+    pair = np.hypot(det.x - 100.0, det.y - 100.0) < 1.0
+    assert np.hypot(det.x[pair] - 100.0, det.y[pair] - 100.0).max() < 0.5
+    alone = np.hypot(det.x - 60.0, det.y - 60.0) < 1.0
+    assert det.area[alone][0] >= 50                                    # its whole rim (57 px), not split off
 
 def test_a_shadow_of_the_skins_hue_beside_a_dot_does_not_move_it():
     """#18, stop 36, the full-HD clip: a blue dot at the jaw line touched the jaw's shadow -- darker and

@@ -396,7 +396,7 @@ def test_a_dot_at_the_silhouette_is_on_the_face_as_the_mirror_sees_it():
     curving away, 13-31 mm. The mirror sees such a dot face on: reflected in the mirror's plane (eq. 3.9)
     among the markers measured through that mirror, it lies on the face. A point moved 30-45 mm along
     the dot's direct ray either way -- a wrong pairing -- is off the face in both views."""
-    from mirrorcap.core.track.late import _off_in_mirrors, _off_the_face
+    from mirrorcap.core.track.onface import off_in_mirrors, off_the_face
 
     centre, radius = np.array([0.0, 0.0, 650.0]), 75.0          # a head, its face turned to the camera
     tilt, turn = np.meshgrid(np.radians(np.arange(0, 64, 8)), np.radians(np.arange(0, 360, 20)))
@@ -412,14 +412,14 @@ def test_a_dot_at_the_silhouette_is_on_the_face_as_the_mirror_sees_it():
     face, dot = points[:-1], points[-1]
     planes = (normal[None], np.array([d]))
     used = np.array([True])
-    assert _off_the_face(face, dot, 10.0)                       # the plane through its neighbours misses it
-    assert not _off_in_mirrors(face, views[:-1], dot, used, planes, 10.0)
+    assert off_the_face(face, dot, 10.0)                       # the plane through its neighbours misses it
+    assert not off_in_mirrors(face, views[:-1], dot, used, planes, 10.0)
     ray = dot / np.linalg.norm(dot)
     for step in (-45.0, -30.0, 30.0, 45.0):
         wrong = dot + step * ray
-        assert _off_the_face(face, wrong, 10.0) and _off_in_mirrors(face, views[:-1], wrong, used, planes, 10.0)
+        assert off_the_face(face, wrong, 10.0) and off_in_mirrors(face, views[:-1], wrong, used, planes, 10.0)
     # the mirror's face is the markers measured through it: with none, the mirror clears nothing
-    assert _off_in_mirrors(face, np.ones(len(face), int), dot, used, planes, 10.0)
+    assert off_in_mirrors(face, np.ones(len(face), int), dot, used, planes, 10.0)
 
 
 def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held_frame=None):

@@ -16,7 +16,8 @@ change when a lamp dims or a surface turns away from it -- against the *local* b
    a dot would join its blob) are candidate dot pixels. Only pixels that differ from the
    background by more than ``min_difference`` levels in some channel, averaged over 3x3 pixels,
    are looked at (a cheap first cut: a dot differs from skin by far more);
-3. **connected components** (8-connected, OpenCV) of the candidate pixels; each blob's
+3. **connected components** (8-connected, OpenCV) of the candidate pixels, split by colour where dots
+   of two classes touch (:func:`split_by_colour`: otherwise they mix to a blob of neither hue); each blob's
    chromaticity is the mean of its pixels' weighted by ``contrast - min_contrast`` (the dot's
    centre, not its edge blended with skin, decides) and so is its **sub-pixel centre**;
 4. **colour class** -- by hue: the class (COLORS.json, as under UV light) whose samples' mean
@@ -55,6 +56,14 @@ BACKGROUND_SHRINK = 4  # the background is estimated on a frame this many times 
 #: a dot's hue differs from the skin around it by this much: each candidate pixel's (step 2), and, when the
 #: classes are learned, each blob's
 FROM_SKIN_DEG = 15.0
+#: two touching dots of two colours: the pixels of each colour centred this far apart (split_by_colour)
+SPLIT_APART_PX = 2.0
+#: ... and, nearer than SPLIT_FAR_PX, each colour holding SPLIT_SHARE of the blob's weight: a dot's rim blended with
+#: a dark skin or the room drifts to another class's hue on one side, 2-3 px from the dot's centre with 1-15 % of its
+#: contrast (the dark clip's green dot at the silhouette took a yellow rim for a dot), where a touching dot lies a
+#: diameter away or holds its own share
+SPLIT_SHARE = 0.25
+SPLIT_FAR_PX = 3.0
 
 
 def hue_saturation(rgb) -> tuple:
@@ -72,6 +81,62 @@ def hue_apart(hue_a, hue_b) -> np.ndarray:
     return np.abs(np.angle(np.exp(1j * (np.asarray(hue_a) - np.asarray(hue_b)))))
 
 
+
+def split_by_colour(lab, n_blobs: int, chroma, xs, ys, weight, class_hues, settings) -> tuple:
+    """Step 3's blobs ``lab`` ``(n,)`` (of ``n_blobs``) of the candidate pixels at ``xs``, ``ys``, each split by
+    colour where dots of two classes touch: ``(labels (n,), count, weight (n,))``. A pixel whose hue (``chroma``:
+    r, g, b summing to 1) lies within ``max_hue_deg`` of a class's (``class_hues``, radians:
+    :meth:`.ColorClasses.hue_centres`) is that class's. A blob is split where two classes or more each hold at
+    least ``min_area`` such pixels, centred (by ``weight``) :data:`SPLIT_APART_PX` from the best-held class's and,
+    nearer than :data:`SPLIT_FAR_PX`, holding :data:`SPLIT_SHARE` of the blob's weight: every such class a blob
+    of its own, the blob's other
+    pixels joining its best-held class. (A lone dot's rim, blended with the skin, drifts towards another
+    class's hue, but rings the dot or holds little of its contrast.) In a split blob each pixel's weight is
+    scaled by how near its hue lies to its piece's class, so the seam where the two colours blend pulls
+    neither centre. Touching dots of two colours -- at a mirror's grazing angle, or two neighbours
+    foreshortened into each other -- otherwise mix to one blob of neither hue, which step 4 drops: both dots
+    lost (held-out tan720: 162 of its 308 unreported seen marker-frames had no mirror blob within 6 px)."""
+    n_classes = len(class_hues)
+    if lab.size == 0 or n_blobs == 0 or n_classes < 2 or settings.max_hue_deg >= 180.0:
+        return lab, n_blobs, weight
+    r, g, b = chroma[:, 0], chroma[:, 1], chroma[:, 2]
+    hue = np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b)               # as hue_saturation
+    apart = np.abs((hue[:, None] - np.asarray(class_hues)[None] + np.pi) % (2.0 * np.pi) - np.pi)   # (n, C)
+    cls = np.argmin(apart, axis=1)
+    own = apart[np.arange(cls.size), cls] <= np.radians(settings.max_hue_deg)
+    cell = lab[own] * n_classes + cls[own]
+    size = n_blobs * n_classes
+    held = np.bincount(cell, minlength=size).reshape(n_blobs, n_classes)
+    strong = held >= settings.min_area
+    mixed = strong.sum(axis=1) >= 2
+    if not mixed.any():
+        return lab, n_blobs, weight
+    w = np.bincount(cell, weight[own], size) + 1e-12
+    cx = (np.bincount(cell, weight[own] * xs[own], size) / w).reshape(n_blobs, n_classes)
+    cy = (np.bincount(cell, weight[own] * ys[own], size) / w).reshape(n_blobs, n_classes)
+    w = w.reshape(n_blobs, n_classes)
+    first = np.argmax(held, axis=1)
+    rows = np.arange(n_blobs)
+    dist = np.hypot(cx - cx[rows, first][:, None], cy - cy[rows, first][:, None])   # each class from the first
+    share = w / w.sum(axis=1, keepdims=True)
+    is_first = np.arange(n_classes)[None] == first[:, None]
+    strong &= (dist >= SPLIT_APART_PX) | is_first
+    mixed = strong.sum(axis=1) >= 2
+    if not mixed.any():
+        return lab, n_blobs, weight
+    # a piece near the best-held one with little of the blob's weight is that dot's rim: cut off, and dropped
+    rim = strong & ~is_first & (share < SPLIT_SHARE) & (dist < SPLIT_FAR_PX)
+    piece = np.where(own & strong[lab, cls], cls, first[lab])
+    key = lab.astype(np.int64) * n_classes + np.where(mixed[lab], piece, 0)
+    uniq, new = np.unique(key, return_inverse=True)
+    # in a split blob a pixel weighs by how near its hue is to its piece's class: where the dots meet, their
+    # colours blend to a hue of neither, and that seam would pull both centres towards it
+    near = 1.0 - apart[np.arange(piece.size), piece] / np.radians(settings.max_hue_deg)
+    weight = np.where(mixed[lab], weight * np.clip(near, 0.0, 1.0), weight)
+    weight = np.where(mixed[lab] & rim[lab, piece], 0.0, weight)
+    return new.astype(lab.dtype), uniq.size, weight
+
+
 class ColorDotExtractor:
     """The normal-light extractor for a stream of same-sized frames: call it with an 8-bit BGR
     frame, get :class:`~.detections.Detections` (see the module text for the steps)."""
@@ -82,6 +147,7 @@ class ColorDotExtractor:
         self.colors, self.settings = colors, settings
         self._mask = None
         self._ones = np.ones((1, 3), np.float32)
+        self._class_hues = colors.hue_centres()
         self._cv2 = cv2
 
     def _background(self, frame):
@@ -142,13 +208,12 @@ class ColorDotExtractor:
         mask.ravel()[idx] = 1
         n, labels = cv2.connectedComponents(mask, None, 8, cv2.CV_32S)
         ys, xs = np.divmod(idx, w)
-        lab = labels.ravel().take(idx) - 1
         wgt = contrast - s.min_contrast
         # r, g, b chromaticity of each pixel and of its background (column sums: numpy's reductions
         # over a length-3 axis cost more than the arithmetic)
         chroma = bgr[:, ::-1] / np.maximum(bgr[:, 0] + bgr[:, 1] + bgr[:, 2], 1.0)[:, None]
         bg_chroma = bg[:, ::-1] / np.maximum(bg[:, 0] + bg[:, 1] + bg[:, 2], 1.0)[:, None]
-        m = n - 1
+        lab, m, wgt = split_by_colour(labels.ravel().take(idx) - 1, n - 1, chroma, xs, ys, wgt, self._class_hues, s)
         sums = np.stack([np.bincount(lab, wgt, m), np.bincount(lab, wgt * xs, m), np.bincount(lab, wgt * ys, m),
                          np.bincount(lab, None, m), np.bincount(lab, value, m),
                          *(np.bincount(lab, wgt * chroma[:, c], m) for c in range(3)),

@@ -157,6 +157,13 @@ class ColorClasses:
         d2 = (self.samples**2).sum(axis=1)[None, :] - 2.0 * nrgb @ self.samples.T
         return self.labels[np.argmin(d2, axis=1)]
 
+    def hue_centres(self) -> np.ndarray:
+        """Each class's hue angle (radians): the circular mean of its samples' hues."""
+        from .colordots import hue_saturation
+
+        s_hue, _ = hue_saturation(self.samples)
+        return np.angle(np.array([np.exp(1j * s_hue[self.labels == c]).mean() for c in range(len(self.names))]))
+
     def by_hue(self, rgb) -> tuple:
         """``(class (n,), hue difference in degrees (n,), saturation (n,))`` of colours ``(n, 3)``:
         the class whose samples' mean hue is nearest (hue: the angle of the colour about the grey
@@ -165,10 +172,7 @@ class ColorClasses:
         from .colordots import hue_apart, hue_saturation
 
         hue, sat = hue_saturation(rgb)
-        s_hue, _ = hue_saturation(self.samples)
-        k = np.arange(len(self.names))
-        centre = np.angle(np.array([np.exp(1j * s_hue[self.labels == c]).mean() for c in k]))
-        diff = hue_apart(hue[:, None], centre[None])
+        diff = hue_apart(hue[:, None], self.hue_centres()[None])
         best = np.argmin(diff, axis=1) if diff.size else np.zeros(len(hue), int)
         return best, np.degrees(diff[np.arange(len(hue)), best]) if diff.size else np.zeros(0), sat
 

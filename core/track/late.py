@@ -10,11 +10,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..geometry.mirror import reflect_points
 from ..geometry.rigid import rotation_zyx, to_head_frame
 from ..capture.views import ClipDetections, frame_spaced
 from .candidates import ClipCandidates
 from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
+from .onface import along_ray, face_offset, off_in_mirrors, off_the_face
+from .pairing import candidate_tracks
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, keep_measured
 
 
@@ -26,6 +27,16 @@ from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, 
 #: other clips 7 mm drops four labels, none of them on a dot the truth counts as seen, and changes one point
 #: over 2 mm (tilt630 53 -> 54)
 LATE_OFF_FACE_MM = 7.0
+
+#: one dot in the direct view, two late chains with two depths (add_late_markers): two chains on one direct 2D track
+#: whose rest positions lie within RIVAL_ACROSS_MM of its line of sight and at least RIVAL_ALONG_MM apart along it
+#: (beyond same_marker_mm, the limit of one marker's two stretches; a dot paired with a like dot's grazing image lands
+#: 6-9 mm along its ray on tan720 and deep720) are rivals, and the one considered later replaces the kept one only
+#: when it lies RIVAL_NEARER_MM nearer the face along its ray (:func:`.onface.face_offset`). At 4 mm along the ray
+#: wide576 lost 1 % of its seen marker-frames: two stretches of one dot at the silhouette, their rests 4.6 mm apart
+RIVAL_ACROSS_MM = 2.0
+RIVAL_ALONG_MM = 5.0
+RIVAL_NEARER_MM = 2.0
 
 
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
@@ -47,9 +58,9 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
     blob with a better supported chain, nor one off the face: more than ``off_face_mm`` along its
     ray, where it is first seen, from the surface through the markers measured then
-    (:func:`_off_the_face`; a direct blob paired with another marker's mirror image lands
+    (:func:`.onface.off_the_face`; a direct blob paired with another marker's mirror image lands
     along its ray, typically ~45 mm away) *and*, with the mirrors' ``planes`` ``(normals (K, 3),
-    ds (K,))`` given, off it as each mirror it was paired through sees it (:func:`_off_in_mirrors`;
+    ds (K,))`` given, off it as each mirror it was paired through sees it (:func:`.onface.off_in_mirrors`;
     :data:`LATE_OFF_FACE_MM`):
     a dot at the face's silhouette lies beyond all its neighbours' rays, where the plane through
     them misses the face curving away (10-30 mm), but the mirror sees it face on. Chance pairings
@@ -132,6 +143,12 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     at_rest = np.full((n_comp, 3), np.nan)
     at_rest[good] = head[q_of] - _motion_near(first_pass, real, head[q_of], f[q_of], s.neighbour_radius_mm)
     keep, seen_from = [], {}
+    # one dot in the direct view is one marker: a chain on the direct 2D tracks of a chain kept, resting
+    # elsewhere (further than same_marker_mm), paired its dot with another mirror blob -- of the two, the one
+    # nearer the face is kept (a dot paired with a like dot's grazing image lands 5-9 mm along its ray)
+    direct_track = candidate_tracks(det, cands)[0]
+    owner = np.full(int(direct_track.max(initial=-1)) + 1, -1)          # the kept chain on each direct track
+    face_off, blobs_of = {}, {}
     for c in good[np.argsort(-support[good], kind="stable")]:  # the chains left (tens), best supported first
         rows = by_chain[bounds[c]:bounds[c + 1]]
         blobs = [key[rows] for key in blob_keys]
@@ -141,9 +158,10 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
             continue
         q = entry_of[c]  # where the chain is first seen: off the face as the camera sees it then?
         seen_then = first_pass.points[f[q]][real]
+        seen_then = seen_then[np.all(np.isfinite(seen_then), axis=1)]
         point, views_then = cands.points[idx[q]], np.where(real, first_pass.camera_mask[f[q]], 0)
-        if _off_the_face(seen_then[np.all(np.isfinite(seen_then), axis=1)], point, off_face_mm) and (
-                planes is None or _off_in_mirrors(first_pass.points[f[q]], views_then, point,
+        if off_the_face(seen_then, point, off_face_mm) and (
+                planes is None or off_in_mirrors(first_pass.points[f[q]], views_then, point,
                                                   cands.mirror_blob[idx[q]] >= 0, planes, off_face_mm)):
             continue
         if keep:
@@ -154,8 +172,25 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
                     at_rest[same] = at_rest[c]      # ... and where it rests is read nearer the neutral frame
                 seen_from[same] = min(seen_from[same], first_f[c])
                 continue
+        tracks_c = direct_track[cand_of[rows]]
+        held_by = owner[tracks_c]
+        face_off[c] = face_offset(seen_then, point)[0]
+        rival = int(np.bincount(held_by[held_by >= 0]).argmax()) if (held_by >= 0).any() else -1
+        ray = R[q].T @ (point / np.linalg.norm(point))                # its line of sight, in the head frame
+        apart = at_rest[rival] - at_rest[c] if rival >= 0 else np.zeros(3)
+        if (rival >= 0 and np.count_nonzero(held_by >= 0) >= 0.5 * rows.size
+                and along_ray(apart, ray) <= RIVAL_ACROSS_MM and abs(apart @ ray) >= RIVAL_ALONG_MM):
+            if not face_off[c] + RIVAL_NEARER_MM < face_off[rival]:     # NaN: the rival stays
+                continue
+            keep.remove(rival)                                         # the rival was the wrong pairing
+            del seen_from[rival]
+            for v, b in enumerate(blobs_of[rival]):
+                used[v][b[b >= 0]] = False
+            owner[owner == rival] = -1
         for v, b in enumerate(blobs):
             used[v][b[b >= 0]] = True
+        owner[tracks_c] = c
+        blobs_of[c] = blobs
         keep.append(c)
         seen_from[c] = first_f[c]
     keep.sort(key=lambda c: (seen_from[c], entry_of[c]))  # markers in order of appearance
@@ -172,47 +207,6 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
 #: (wide576's dots 129 and 200 were lost for good when any stretch gave it). At 1.0 mm pitch800 keeps 8 more
 #: points over 2 mm; at 2.0 mm tilt630 5
 REST_AGREE_MM = 1.5
-
-FACE_MARKERS = 6  # the markers nearest a point's ray that give the face there (_off_the_face)
-
-
-def _off_the_face(neutral, point, off_mm: float, k: int = FACE_MARKERS) -> bool:
-    """Is ``point`` more than ``off_mm`` along its ray from the face formed by the markers
-    ``neutral`` ``(N, 3)`` (one frame, camera frame: the frame the point is seen in, so the
-    face there faces the camera)? The face: the plane ``z = a x' + b y' + c`` (``x' = x/z``,
-    ``y' = y/z``, the ray's direction) through the ``k`` markers nearest to its ray, least
-    squares; where the plane fits them loosely (the face curving away) the limit grows to 4x
-    that misfit. With fewer than ``k`` markers nothing is decided."""
-    if len(neutral) < k or not np.all(np.isfinite(point)) or point[2] <= 0:
-        return False
-    rays = neutral[:, :2] / neutral[:, 2:3]
-    ray = point[:2] / point[2]
-    near = np.argsort(np.linalg.norm(rays - ray, axis=1))[:k]
-    A = np.c_[rays[near], np.ones(k)]
-    coef, *_ = np.linalg.lstsq(A, neutral[near, 2], rcond=None)
-    z_face = float(np.r_[ray, 1.0] @ coef)
-    # where the face curves away (the silhouette) the plane fits its own markers loosely: allow that
-    spread = float(np.sqrt(np.mean((A @ coef - neutral[near, 2]) ** 2)))
-    return abs(point[2] - z_face) * float(np.sqrt(1.0 + ray @ ray)) > max(off_mm, 4.0 * spread)
-
-
-def _off_in_mirrors(markers, views, point, used, planes, off_mm: float) -> bool:
-    """Is ``point`` off the face (:func:`_off_the_face`) as every mirror it was paired through sees it
-    (``used (K,)``; ``planes`` ``(normals (K, 3), ds (K,))``)? The face in mirror ``k``: the markers
-    ``(N, 3)`` (camera frame, NaN where not measured) measured through it, bit ``2 << k`` of their
-    camera mask ``views (N,)``. A mirror shows the scene as the camera reflected in its plane would
-    (eq. 3.9): reflecting the markers and the point puts that view where :func:`_off_the_face` looks
-    from. A wrong pairing lies on another dot's mirror ray, off the face along it as well. A mirror
-    through which fewer than :func:`_off_the_face`'s ``k`` markers were measured clears nothing."""
-    normals, ds = planes
-    for k in np.flatnonzero(used):
-        face = markers[((views & (2 << k)) > 0) & np.all(np.isfinite(markers), axis=1)]
-        if len(face) >= FACE_MARKERS and not _off_the_face(reflect_points(face, normals[k], ds[k]),
-                                                           reflect_points(point, normals[k], ds[k]), off_mm,
-                                                           FACE_MARKERS):
-            return False
-    return True
-
 
 def _pairs_frames_apart(points, frame, within: float, max_gap: int) -> np.ndarray:
     """Pairs ``(P, 2)`` of ``points`` ``(M, D)`` within ``within`` of each other whose
@@ -565,7 +559,7 @@ def release_other_markers_blobs(result: TrackResult, det: ClipDetections, cands:
         near = near[np.isin(b[hit[near]].astype(np.int64) * n_tracks + track[near], claimed)]
         for frame, label in zip(f[near], a[near]):      # a few per take: is the point off the face as well?
             rest = np.flatnonzero(measured[frame] & (np.arange(measured.shape[1]) != label))
-            drop[frame, label] = _off_the_face(result.points[frame, rest], result.points[frame, label], OFF_FACE_MM)
+            drop[frame, label] = off_the_face(result.points[frame, rest], result.points[frame, label], OFF_FACE_MM)
         # and the label's other frames on that mirror track: the same wrong pairing
         pairing = a.astype(np.int64) * n_tracks + track
         wrong = np.isin(pairing, pairing[drop[f, a]])
