@@ -71,7 +71,9 @@ contact-sheet: $(STAMP)
 # 2.8x as fast; rendered during stop 35, held out from its choices); pitch800 (800x600, a 4:3 sensor, 200 dots of 2.8 mm,
 # mirrors at 40 deg, +-12 deg pitch) and vga480 (640x480, 160 dots of 3 mm, mirrors at 48 deg, face 700 mm away, +-14 deg
 # yaw, +-6 deg roll), rendered at stop 36 and tuned on by nothing; cam450 (800x450, 150 dots of 3.2 mm, mirrors at 46
-# deg, +-12 deg yaw), rendered at stop 37 to check its change and tuned on by nothing. About 100 minutes.
+# deg, +-12 deg yaw), rendered at stop 37 to check its change and tuned on by nothing; side600 (1024x600, 220 dots of
+# 2.4 mm, mirrors at 50 deg, +-14 deg yaw, +-6 deg roll), rendered at stop 38 and the clip its tracker change was found
+# on. About 105 minutes.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -129,6 +131,9 @@ stress-clips: $(STAMP)
 		--no-scan
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/cam450 --size 800 450 --focal 720 --distance 620 \
 		--mirror-deg 46 --markers 150 --marker-mm 3.2 --head-deg 8 12 5 --tempo 1.6 --frames 90 --samples 4 --seed 371 \
+		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/side600 --size 1024 600 --focal 980 --distance 600 \
+		--mirror-deg 50 --markers 220 --marker-mm 2.4 --head-deg 10 14 6 --tempo 2.2 --frames 90 --samples 4 --seed 421 \
 		--no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin

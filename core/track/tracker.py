@@ -333,6 +333,21 @@ def rigid_by_image(camera: Camera, neutral, colour, region=None, colours=None) -
     return np.flatnonzero(ok)
 
 
+def _continuing_owner(cont, cont_held, sl, n_markers) -> np.ndarray:
+    """Per candidate of the frame's slice ``sl``, the marker whose own 2D tracks it continues
+    (:func:`.pairing.continuing_candidate`: ``cont`` (N,), index of the clip's candidates, -1 none), where that
+    marker has held its mirror track :data:`HELD_FRAMES` measurements (``cont_held``) and no other marker's tracks
+    lead there too; -1 elsewhere."""
+    owner = np.full(sl.stop - sl.start, -1)
+    mine = np.flatnonzero((cont >= 0) & (cont_held >= HELD_FRAMES))
+    if mine.size:
+        at = cont[mine] - sl.start
+        claims = np.bincount(at, minlength=owner.size)
+        owner[at] = mine
+        owner[claims > 1] = -1
+    return owner
+
+
 def _resolve_conflicts(a, near, keys):
     """Conflicts (procedure step 6): a 2D blob -- direct, or in a mirror -- claimed by
     two markers in one frame stays with the marker closest to its prediction.
@@ -439,6 +454,18 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                     inside = gap <= gate_i[other]
                     a[other[inside]], near[other[inside]] = cont[other[inside]], gap[inside]
                 confirmed = valid & (a == cont)
+                # a candidate on another marker's own 2D tracks, held HELD_FRAMES measurements, is that marker's
+                # dot: a marker coasting through a gap of its own does not take it, its owner does (side600: a dot
+                # moving 5 px in 3 frames at the silhouette coasted 10 px onto its neighbour's dot, 11 mm away,
+                # while the neighbour, its step along the line of sight, was lost)
+                owner = _continuing_owner(cont, cont_held, sl, N)
+                taken = np.flatnonzero(valid & ~confirmed & (last_frame >= 0) & (last_frame < t - 1))
+                stolen = taken[(owner[a[taken] - sl.start] >= 0) & (owner[a[taken] - sl.start] != taken)]
+                owners = owner[a[stolen] - sl.start]
+                back_to = ~valid[owners]
+                o, c = owners[back_to], a[stolen[back_to]]
+                a[o], near[o], valid[o], confirmed[o] = c, np.linalg.norm(cand_key[c] - query[o], axis=1), True, True
+                valid[stolen], a[stolen] = False, -1
                 # no candidate in the gate, but one on the marker's own 2D tracks: the same dot, moved
                 # faster than the gate allows (a jaw opening in a frame or two). The direct view's track
                 # vouches for the motion across the line of sight; along it, where only the mirror's
