@@ -78,7 +78,7 @@ def hue_saturation(rgb) -> tuple:
 def hue_apart(hue_a, hue_b) -> np.ndarray:
     """The angle (radians, 0 to pi) between hue angles ``hue_a`` and ``hue_b`` (broadcast), across the
     wrap at +-pi."""
-    return np.abs(np.angle(np.exp(1j * (np.asarray(hue_a) - np.asarray(hue_b)))))
+    return np.abs((np.asarray(hue_a) - np.asarray(hue_b) + np.pi) % (2.0 * np.pi) - np.pi)
 
 
 
@@ -99,9 +99,7 @@ def split_by_colour(lab, n_blobs: int, chroma, xs, ys, weight, class_hues, setti
     n_classes = len(class_hues)
     if lab.size == 0 or n_blobs == 0 or n_classes < 2 or settings.max_hue_deg >= 180.0:
         return lab, n_blobs, weight
-    r, g, b = chroma[:, 0], chroma[:, 1], chroma[:, 2]
-    hue = np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b)               # as hue_saturation
-    apart = np.abs((hue[:, None] - np.asarray(class_hues)[None] + np.pi) % (2.0 * np.pi) - np.pi)   # (n, C)
+    apart = hue_apart(hue_saturation(chroma)[0][:, None], np.asarray(class_hues)[None])     # (n, C)
     cls = np.argmin(apart, axis=1)
     own = apart[np.arange(cls.size), cls] <= np.radians(settings.max_hue_deg)
     cell = lab[own] * n_classes + cls[own]

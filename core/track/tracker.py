@@ -333,7 +333,7 @@ def rigid_by_image(camera: Camera, neutral, colour, region=None, colours=None) -
     return np.flatnonzero(ok)
 
 
-def _continuing_owner(cont, cont_held, sl, n_markers) -> np.ndarray:
+def _continuing_owner(cont, cont_held, sl) -> np.ndarray:
     """Per candidate of the frame's slice ``sl``, the marker whose own 2D tracks it continues
     (:func:`.pairing.continuing_candidate`: ``cont`` (N,), index of the clip's candidates, -1 none), where that
     marker has held its mirror track :data:`HELD_FRAMES` measurements (``cont_held``) and no other marker's tracks
@@ -458,7 +458,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 # dot: a marker coasting through a gap of its own does not take it, its owner does (side600: a dot
                 # moving 5 px in 3 frames at the silhouette coasted 10 px onto its neighbour's dot, 11 mm away,
                 # while the neighbour, its step along the line of sight, was lost)
-                owner = _continuing_owner(cont, cont_held, sl, N)
+                owner = _continuing_owner(cont, cont_held, sl)
                 taken = np.flatnonzero(valid & ~confirmed & (last_frame >= 0) & (last_frame < t - 1))
                 stolen = taken[(owner[a[taken] - sl.start] >= 0) & (owner[a[taken] - sl.start] != taken)]
                 owners = owner[a[stolen] - sl.start]
