@@ -173,13 +173,9 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
                 seen_from[same] = min(seen_from[same], first_f[c])
                 continue
         tracks_c = direct_track[cand_of[rows]]
-        held_by = owner[tracks_c]
         face_off[c] = face_offset(seen_then, point)[0]
-        rival = int(np.bincount(held_by[held_by >= 0]).argmax()) if (held_by >= 0).any() else -1
-        ray = R[q].T @ (point / np.linalg.norm(point))                # its line of sight, in the head frame
-        apart = at_rest[rival] - at_rest[c] if rival >= 0 else np.zeros(3)
-        if (rival >= 0 and np.count_nonzero(held_by >= 0) >= 0.5 * rows.size
-                and along_ray(apart, ray) <= RIVAL_ACROSS_MM and abs(apart @ ray) >= RIVAL_ALONG_MM):
+        rival = _rival(owner[tracks_c], at_rest, c, R[q].T @ (point / np.linalg.norm(point)))
+        if rival >= 0:
             if not face_off[c] + RIVAL_NEARER_MM < face_off[rival]:     # NaN: the rival stays
                 continue
             keep.remove(rival)                                         # the rival was the wrong pairing
@@ -198,6 +194,19 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
         return markers
     return (np.r_[first_blob, np.full(len(keep), -1)], np.vstack([neutral, at_rest[keep]]),
             np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
+
+
+def _rival(held_by, at_rest, c, ray) -> int:
+    """The kept chain that holds most of chain ``c``'s direct 2D tracks (``held_by``: the kept chain on each
+    of its rows' tracks, -1 none), when it holds half of them or more and rests on ``c``'s line of sight
+    (``ray``, unit, head frame) :data:`RIVAL_ALONG_MM` or more away along it, within :data:`RIVAL_ACROSS_MM`
+    of it; else -1."""
+    held = held_by[held_by >= 0]
+    if held.size == 0 or held.size < 0.5 * held_by.size:
+        return -1
+    rival = int(np.bincount(held).argmax())
+    apart = at_rest[rival] - at_rest[c]
+    return rival if along_ray(apart, ray) <= RIVAL_ACROSS_MM and abs(apart @ ray) >= RIVAL_ALONG_MM else -1
 
 
 #: an earlier stretch of a late marker gives it its rest position (add_late_markers) when the two stretches'

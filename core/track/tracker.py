@@ -460,8 +460,9 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 # while the neighbour, its step along the line of sight, was lost)
                 owner = _continuing_owner(cont, cont_held, sl)
                 taken = np.flatnonzero(valid & ~confirmed & (last_frame >= 0) & (last_frame < t - 1))
-                stolen = taken[(owner[a[taken] - sl.start] >= 0) & (owner[a[taken] - sl.start] != taken)]
-                owners = owner[a[stolen] - sl.start]
+                claim = owner[a[taken] - sl.start]
+                other_s = (claim >= 0) & (claim != taken)
+                stolen, owners = taken[other_s], claim[other_s]
                 back_to = ~valid[owners]
                 o, c = owners[back_to], a[stolen[back_to]]
                 a[o], near[o], valid[o], confirmed[o] = c, np.linalg.norm(cand_key[c] - query[o], axis=1), True, True
