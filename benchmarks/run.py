@@ -12,6 +12,8 @@ Writes (atomically) into the output folder:
 * ``extraction.json`` -- marker extraction accuracy under faults, speed, memory;
 * ``tracking.json`` -- tracking accuracy and speed from detections;
 * ``track_command.json`` -- the whole ``mirrorcap track`` on a rendered 1280x720 MP4 (speed, accuracy);
+* ``track_under_load.json`` -- the whole ``mirrorcap track`` on three clips with both cores kept busy by
+  other processes, with one BLAS thread and with BLAS's own count;
 * ``stress_clips.json`` -- the whole ``mirrorcap track`` on each Cycles stress clip of ``sample_scenes/stress``
   (speed, accuracy, completeness against the truth's visibility);
 * ``animation.json`` -- bake of 1,000 frames, head fit, rig accuracy, PCA error vs modes;
@@ -42,7 +44,8 @@ from .batch import batch_summary, run_batch_benchmark
 from .takes import (arkit_summary, run_arkit_benchmark, run_stabilize_benchmark, run_transfer_benchmark,
                     stabilize_summary, transfer_summary)
 from .extraction import run_extraction_benchmark
-from .tracking import run_stress_clip_benchmark, run_track_command_benchmark, run_tracking_benchmark
+from .tracking import (run_loaded_track_benchmark, run_stress_clip_benchmark, run_track_command_benchmark,
+                       run_tracking_benchmark)
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
 from .speed import run_speed
 
@@ -235,6 +238,19 @@ def stress_summary(stress) -> list:
     return lines + [""]
 
 
+def loaded_summary(loaded: dict) -> list:
+    """track_under_load.json as a table."""
+    lines = ["**The whole `mirrorcap track` with both cores kept busy by two other processes** "
+             "(`track_under_load.json`; seconds, tracking alone in brackets):", "",
+             "| clip | frames | one BLAS thread (default) | BLAS's own threads (`MIRRORCAP_BLAS_THREADS=0`) |",
+             "| --- | --- | --- | --- |"]
+    for name, r in loaded.items():
+        one, own = r["one_blas_thread"], r["blas_default"]
+        lines.append(f"| {name} | {r['frames']} | {one['seconds']:.1f} s ({one['track_s']:.1f} s) | "
+                     f"{own['seconds']:.1f} s ({own['track_s']:.1f} s) |")
+    return lines + [""]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.run", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -307,6 +323,9 @@ def main(argv=None) -> int:
         trk = {**trk, "_command": cmd}
     stress = measure_or_reuse(args.skip_tracking, "stress_clips.json", "whole `mirrorcap track` on the stress clips ...",
                               run_stress_clip_benchmark)
+    loaded = measure_or_reuse(args.skip_tracking, "track_under_load.json",
+                              "whole `mirrorcap track` with every core kept busy by other processes ...",
+                              run_loaded_track_benchmark)
     anim = measure_or_reuse(args.skip_animation, "animation.json", "head fit, rig and bake ...",
                             run_animation_benchmark)
     batch = measure_or_reuse(args.skip_batch, "batch.json", "batch bake of 4 takes, 1 and 2 workers ...",
@@ -320,6 +339,8 @@ def main(argv=None) -> int:
     summary = _summary(speed, rows, expected, args.trials, seconds, ext, trk)
     if stress:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(stress_summary(stress)) + "\n"
+    if loaded:
+        summary = summary.rstrip("\n") + "\n\n" + "\n".join(loaded_summary(loaded)) + "\n"
     if anim is not None:
         summary = summary.rstrip("\n") + "\n" + "\n".join(animation_summary(anim)) + "\n"
     if batch is not None:

@@ -252,3 +252,78 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
                  f"mm (max {r['max_mm']:.2f}), {r['identity_switches']} switches, "
                  f"{100 * r.get('seen_reported_fraction', float('nan')):.1f} % of seen marker-frames reported")
     return out
+
+
+def _keep_a_core_busy(stop) -> None:
+    """A competing job: spins one core until ``stop`` (a multiprocessing Event) is set."""
+    x = 0
+    while not stop.is_set():
+        for _ in range(100_000):
+            x += 1
+
+
+LOADED_CLIPS = (STRESS_CLIPS / "tilt630", STRESS_CLIPS / "dense", NORMAL_CLIPS / "light")
+
+
+def run_loaded_track_benchmark(clips=LOADED_CLIPS, busy: int = 2, progress=print) -> dict:
+    """The whole ``mirrorcap track`` on rendered clips while ``busy`` other processes keep every
+    core of this 2-core machine busy (as a render, a second take or a batch would): with the
+    core's one BLAS thread (``core.common.threads``, the default) and with BLAS's own thread count
+    (``MIRRORCAP_BLAS_THREADS=0``, what the tracker did before). Seconds and frames/s of each."""
+    import json
+    import os
+    import tempfile
+    from multiprocessing import get_context
+
+    from mirrorcap.core.capture.markers import ExtractionSettings
+    from mirrorcap.core.capture.rig import load_rig_views
+    from mirrorcap.core.capture.video import open_source
+    from mirrorcap.core.common.threads import BLAS_THREADS_ENV
+    from mirrorcap.core.geometry.camera import Camera
+    from mirrorcap.core.track.pipeline import run_track
+
+    out = {}
+    ctx = get_context("spawn")
+    before = os.environ.get(BLAS_THREADS_ENV)
+    try:
+        for clip in map(Path, clips):
+            if not (clip / "clip.mp4").is_file():
+                continue
+            camera = Camera.from_dict(json.loads((clip / "camera.json").read_text()))
+            made = json.loads((clip / "clip.json").read_text()) if (clip / "clip.json").is_file() else {}
+            settings = ExtractionSettings(light=made.get("light", "uv"))
+            row = {}
+            for name, value in (("one_blas_thread", None), ("blas_default", "0")):
+                if value is None:
+                    os.environ.pop(BLAS_THREADS_ENV, None)
+                else:
+                    os.environ[BLAS_THREADS_ENV] = value
+                stop = ctx.Event()
+                hogs = [ctx.Process(target=_keep_a_core_busy, args=(stop,), daemon=True) for _ in range(busy)]
+                for h in hogs:
+                    h.start()
+                try:
+                    time.sleep(0.5)
+                    with tempfile.TemporaryDirectory() as tmp:
+                        t0 = time.perf_counter()
+                        rep = run_track(open_source(clip / "clip.mp4"), camera, Path(tmp) / "take.c3d",
+                                        report=Path(tmp) / "take.json", layout=load_rig_views(clip / "rig.json"),
+                                        extraction=settings)
+                        seconds = time.perf_counter() - t0
+                finally:
+                    stop.set()
+                    for h in hogs:
+                        h.join()
+                frames = rep["frames"]["count"]
+                row[name] = {"seconds": seconds, "frames_per_s": frames / seconds,
+                             "detect_s": rep["timings_s"]["detect"], "track_s": rep["timings_s"]["track"]}
+            out[clip.name] = {"frames": frames, "busy_processes": busy, **row}
+            progress(f"  {clip.name} with {busy} busy processes: {row['one_blas_thread']['seconds']:.1f} s "
+                     f"(track {row['one_blas_thread']['track_s']:.1f} s) with one BLAS thread, "
+                     f"{row['blas_default']['seconds']:.1f} s (track {row['blas_default']['track_s']:.1f} s) with BLAS's own")
+    finally:
+        if before is None:
+            os.environ.pop(BLAS_THREADS_ENV, None)
+        else:
+            os.environ[BLAS_THREADS_ENV] = before
+    return out

@@ -41,6 +41,7 @@ import sys
 
 from ..core import __version__
 from ..core.common.errors import MirrorCapError
+from ..core.common.threads import limited_blas
 from . import commands
 
 
@@ -334,7 +335,8 @@ def main(argv=None) -> int:
     if getattr(args, "threshold", 1.0) <= 0:
         parser.error("--threshold must be positive")
     try:
-        return args.func(args)
+        with limited_blas():        # one BLAS thread (core/common/threads.py): tiny solves stall on more
+            return args.func(args)
     except MirrorCapError as exc:
         print(f"mirrorcap: error: {exc}", file=sys.stderr)
         return 2

@@ -44,9 +44,10 @@ def test_extension_builds_one_zip_per_platform_with_its_wheels(built):
     assert sorted(built) == [f"mirrorcap-0.1.0-{p}.zip" for p in ("linux_x64", "macos_arm64", "macos_x64", "windows_x64")]
     names = zipfile.ZipFile(built["mirrorcap-0.1.0-linux_x64.zip"]).namelist()
     wheels = [n for n in names if n.startswith("wheels/")]
-    assert len(wheels) == 3 and all("manylinux" in w for w in wheels)
+    assert len(wheels) == 4 and all("manylinux" in w or w.endswith("-py3-none-any.whl") for w in wheels)
     assert any(w.startswith("wheels/scipy-") for w in wheels) and any("opencv" in w for w in wheels)
     assert any(w.startswith("wheels/ezc3d-") for w in wheels)
+    assert "wheels/threadpoolctl-3.6.0-py3-none-any.whl" in wheels      # pure Python: every platform's zip
     assert not any("numpy" in n for n in names)
     assert "sample_scenes/generic_head/head.npz" in names and "core/track/tracker.py" in names
     # the synthetic tools, the demo and the command line stay out of the product
@@ -79,11 +80,20 @@ def test_install_and_enable_like_a_user(built, tmp_path):
         "ez = importlib.util.module_from_spec(spec); sys.modules['ezc3d_bundled'] = ez; spec.loader.exec_module(ez)\n"
         "c3d_ok = ez.c3d()['header']['points']['size'] == 0\n"
         "values = [kb.value for kb in obj.data.shape_keys.key_blocks[1:]]\n"
+        # the core's jobs run on one BLAS thread inside Blender too (the bundled threadpoolctl)
+        "threads = importlib.import_module('bl_ext.user_default.mirrorcap.core.common.threads')\n"
+        "import threadpoolctl\n"
+        "blas = lambda: sorted({i['num_threads'] for i in threadpoolctl.threadpool_info() if i['user_api'] == 'blas' "
+        "and i.get('threading_layer') != 'disabled'})\n"
+        "with threadpoolctl.threadpool_limits(2, user_api='blas'):\n"
+        "    outside = blas()\n"
+        "    with threads.limited_blas(): inside = blas()\n"
         "print('RESULT ' + json.dumps({'install': sorted(r), 'enabled': addon is not None, 'ops': ops,\n"
         "    'panels': panels, 'marker_size': addon.preferences.empty_size_mm if addon else None,\n"
         "    'head': sorted(head), 'vertices': len(obj.data.vertices), 'keys': len(obj.data.shape_keys.key_blocks),\n"
         "    'core_from': mod.__file__, 'scene_settings': hasattr(bpy.context.scene, 'mirrorcap'),\n"
-        "    'shown_off_rest_mm': shown_mm, 'key_values': sorted(set(values)), 'ezc3d': ez.__file__, 'c3d_ok': c3d_ok}))\n"
+        "    'shown_off_rest_mm': shown_mm, 'key_values': sorted(set(values)), 'ezc3d': ez.__file__, 'c3d_ok': c3d_ok,\n"
+        "    'blas_outside': outside, 'blas_inside': inside}))\n"
     )
     res = _run(["-c", code], env={"BLENDER_USER_RESOURCES": str(tmp_path / "user")})
     assert res.returncode == 0, res.stdout + res.stderr
@@ -100,6 +110,8 @@ def test_install_and_enable_like_a_user(built, tmp_path):
     site = tmp_path / "user" / "extensions" / ".local" / "lib" / "python3.11" / "site-packages"
     assert (site / "scipy").is_dir() and (site / "cv2").is_dir() and (site / "ezc3d").is_dir()
     assert out["c3d_ok"] and str(tmp_path / "user") in out["ezc3d"]   # the bundled ezc3d loads in Blender
+    assert (site / "threadpoolctl.py").is_file()
+    assert out["blas_inside"] == [1] and out["blas_outside"] == [2]   # one BLAS thread inside a job, two after
 
 
 @pytest.fixture(scope="module")

@@ -66,6 +66,9 @@ WHEELS: dict[str, tuple[str, tuple[str, ...], str]] = {
     "ezc3d-1.7.2-cp311-cp311-macosx_10_9_x86_64.whl": (
         "ezc3d==1.7.2", ("macosx_10_9_x86_64",),
         "0254ac8fac4c2d5855db455eeb7cb8fe9dd5088e7bd1c287fbf65c0f2383dd7e"),
+    "threadpoolctl-3.6.0-py3-none-any.whl": (
+        "threadpoolctl==3.6.0", ("any",),
+        "43a0b8fd5a2928500110039e43a5eed8480b918967083ea48dc3ab9f13c4a7fb"),
 }
 
 

@@ -50,6 +50,7 @@ from ..capture.video import VideoSource
 from ..common.log import MessageLog
 from ..common.errors import DegenerateError, InputError
 from ..common.files import write_files_atomically
+from ..common.threads import with_limited_blas
 from ..geometry.camera import Camera
 from ..geometry.mirror import MirrorPlane
 from ..take.c3d import c3d_bytes
@@ -72,6 +73,7 @@ def collect_detections(stream) -> tuple[list, list]:
     return numbers, frames
 
 
+@with_limited_blas
 def run_track(source: VideoSource, camera: Camera, output, *, report=None, colors: ColorClasses | None = None,
               extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
               known_length=None, start: int = 0, end: int | None = None, step: int = 1,
@@ -114,6 +116,7 @@ def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
     return float(np.median(z))
 
 
+@with_limited_blas
 def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
                      timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,

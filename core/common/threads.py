@@ -1,0 +1,68 @@
+"""One BLAS thread for MirrorCap's jobs (every command of the command line, every add-on job,
+and the core's detection and tracking entry points for callers of their own).
+
+The core's array code makes tens of thousands of BLAS and LAPACK calls on tiny matrices (batched
+3x3 solves and inverses, (frames x 3) @ (3 x 3) products, per-frame least squares). OpenBLAS, which
+numpy and scipy bundle, runs each of them on all its threads, and a thread that is not scheduled at
+once stalls the call: with another job keeping the cores busy (Blender rendering, a second take
+tracked, a batch) a 90-frame clip's tracking took 24 s against 1.3 s, the ARKit solve of 1,000
+frames 46 s against 2.8 s. On an idle machine one thread is as fast or faster (the 600-frame bench
+clip tracks as fast with about a fifth less CPU; the ARKit solve 1.4 s against 1.8 s), except for
+the PCA bake's one large SVD (0.9 s against 0.5 s).
+
+``MIRRORCAP_BLAS_THREADS`` sets the count (a whole number; 0 leaves BLAS its own default). The limit
+is process-wide while a job runs (threadpoolctl) and is lifted when it returns. It reaches the BLAS
+libraries loaded when the job starts, so numpy's and scipy's are loaded first.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from contextlib import contextmanager
+
+from .errors import InputError
+
+BLAS_THREADS_ENV = "MIRRORCAP_BLAS_THREADS"
+DEFAULT_BLAS_THREADS = 1
+
+
+def blas_threads() -> int:
+    """The BLAS thread count the core's jobs run with: ``MIRRORCAP_BLAS_THREADS`` or
+    :data:`DEFAULT_BLAS_THREADS`; 0 means BLAS's own default (no limit)."""
+    raw = os.environ.get(BLAS_THREADS_ENV, "").strip()
+    if not raw:
+        return DEFAULT_BLAS_THREADS
+    try:
+        n = int(raw)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise InputError(f"{BLAS_THREADS_ENV}={raw!r}: give a whole number of threads (0: BLAS's own default)")
+    return n
+
+
+@contextmanager
+def limited_blas():
+    """Run the enclosed work with :func:`blas_threads` BLAS threads, restoring the previous count after."""
+    n = blas_threads()
+    if n == 0:
+        yield
+        return
+    import numpy  # noqa: F401  -- both BLAS libraries loaded, so that the limit reaches them
+    import scipy.linalg  # noqa: F401
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=n, user_api="blas"):
+        yield
+
+
+def with_limited_blas(job):
+    """Decorator: the job runs inside :func:`limited_blas`."""
+
+    @functools.wraps(job)
+    def run(*args, **kwargs):
+        with limited_blas():
+            return job(*args, **kwargs)
+
+    return run
