@@ -160,4 +160,7 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 110,75,55 --out sample_scenes/normal/deep720 \
 		--size 1280 720 --focal 1100 --markers 200 --marker-mm 2.6 --mirror-deg 42 --distance 640 --head-deg 8 12 4 \
 		--tempo 2.0 --frames 90 --samples 4 --seed 431 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 160,110,90 --out sample_scenes/normal/ruddy540 \
+		--size 960 540 --focal 820 --markers 200 --marker-mm 2.8 --mirror-deg 46 --distance 620 --head-deg 10 12 7 \
+		--tempo 1.8 --frames 90 --samples 4 --seed 481 --no-scan
 
