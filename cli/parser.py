@@ -343,6 +343,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:       # outputs are written atomically: nothing half-written is left
         print("mirrorcap: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:         # the reader went away (`mirrorcap info TAKE.c3d | head`): stop quietly
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit's flush
+        return 141
 
 
 

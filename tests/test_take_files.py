@@ -181,3 +181,16 @@ def test_a_truncated_file_does_not_hang_the_reader(vendor_files, tmp_path):
     res = subprocess.run([sys.executable, "-m", "mirrorcap", "info", str(tmp_path / "cut.c3d")],
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 2 and "truncated" in res.stderr
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path):
+    """``mirrorcap info TAKE.c3d | head``: a pipe its reader closed ends the command with status 141 (as a
+    shell reports SIGPIPE) and nothing on stderr, not a BrokenPipeError traceback."""
+    path = tmp_path / "take.c3d"
+    write_c3d(path, [f"m{i:03d}" for i in range(40)], np.zeros((30, 40, 3)), 30.0)
+    proc = subprocess.Popen([sys.executable, "-m", "mirrorcap", "info", str(path)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()                       # the reader goes away before the first line is written
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141, err
+    assert err == ""
