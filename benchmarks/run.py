@@ -2,6 +2,7 @@
 
     python -m benchmarks.run --out bench_results [--trials 100] [--workers 2] [--skip-simulation]
         [--skip-extraction] [--skip-tracking] [--skip-animation] [--skip-batch] [--skip-takes]
+        [--long-take FRAMES]
 
 Writes (atomically) into the output folder:
 
@@ -14,6 +15,8 @@ Writes (atomically) into the output folder:
 * ``track_command.json`` -- the whole ``mirrorcap track`` on a rendered 1280x720 MP4 (speed, accuracy);
 * ``track_under_load.json`` -- the whole ``mirrorcap track`` on three clips with both cores kept busy by
   other processes, with one BLAS thread and with BLAS's own count;
+* ``long_take.json`` -- with ``--long-take FRAMES``: the whole ``mirrorcap track`` on a FRAMES-frame take
+  (speed, peak memory, accuracy);
 * ``stress_clips.json`` -- the whole ``mirrorcap track`` on each Cycles stress clip of ``sample_scenes/stress``
   (speed, accuracy, completeness against the truth's visibility);
 * ``animation.json`` -- bake of 1,000 frames, head fit, rig accuracy, PCA error vs modes;
@@ -44,8 +47,8 @@ from .batch import batch_summary, run_batch_benchmark
 from .takes import (arkit_summary, run_arkit_benchmark, run_stabilize_benchmark, run_transfer_benchmark,
                     stabilize_summary, transfer_summary)
 from .extraction import run_extraction_benchmark
-from .tracking import (run_loaded_track_benchmark, run_stress_clip_benchmark, run_track_command_benchmark,
-                       run_tracking_benchmark)
+from .tracking import (run_loaded_track_benchmark, run_long_take_benchmark, run_stress_clip_benchmark,
+                       run_track_command_benchmark, run_tracking_benchmark)
 from .simulation import EXPERIMENTS, METHOD_LABELS, METHODS, expected_error_check, run_simulations
 from .speed import run_speed
 
@@ -264,6 +267,8 @@ def main(argv=None) -> int:
     parser.add_argument("--skip-animation", action="store_true", help="no head/fit/rig/bake benchmark")
     parser.add_argument("--skip-batch", action="store_true", help="no `mirrorcap batch` benchmark")
     parser.add_argument("--skip-takes", action="store_true", help="no stabilize / ARKit benchmarks")
+    parser.add_argument("--long-take", type=int, default=0, metavar="FRAMES",
+                        help="also track a FRAMES-frame take (3600: a minute; ~5 minutes) -> long_take.json")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -326,6 +331,9 @@ def main(argv=None) -> int:
     loaded = measure_or_reuse(args.skip_tracking, "track_under_load.json",
                               "whole `mirrorcap track` with every core kept busy by other processes ...",
                               run_loaded_track_benchmark)
+    long_take = measure_or_reuse(not args.long_take, "long_take.json",
+                                 f"whole `mirrorcap track` on a {args.long_take}-frame take ...",
+                                 lambda: run_long_take_benchmark(args.long_take))
     anim = measure_or_reuse(args.skip_animation, "animation.json", "head fit, rig and bake ...",
                             run_animation_benchmark)
     batch = measure_or_reuse(args.skip_batch, "batch.json", "batch bake of 4 takes, 1 and 2 workers ...",
@@ -341,6 +349,11 @@ def main(argv=None) -> int:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(stress_summary(stress)) + "\n"
     if loaded:
         summary = summary.rstrip("\n") + "\n\n" + "\n".join(loaded_summary(loaded)) + "\n"
+    if long_take:
+        summary = (summary.rstrip("\n") + f"\n\n**A long take** (`long_take.json`): {long_take['frames']} frames "
+                   f"{long_take['size'][0]}x{long_take['size'][1]}, {long_take['markers_tracked']} markers: "
+                   f"{long_take['frames_per_s']:.0f} frames/s, peak resident memory {long_take['peak_rss_mb']:.0f} MB, "
+                   f"{long_take['rms_mm']:.3f} mm RMS, {long_take['identity_switches']} identity switches.\n")
     if anim is not None:
         summary = summary.rstrip("\n") + "\n" + "\n".join(animation_summary(anim)) + "\n"
     if batch is not None:

@@ -320,10 +320,51 @@ def run_loaded_track_benchmark(clips=LOADED_CLIPS, busy: int = 2, progress=print
             out[clip.name] = {"frames": frames, "busy_processes": busy, **row}
             progress(f"  {clip.name} with {busy} busy processes: {row['one_blas_thread']['seconds']:.1f} s "
                      f"(track {row['one_blas_thread']['track_s']:.1f} s) with one BLAS thread, "
-                     f"{row['blas_default']['seconds']:.1f} s (track {row['blas_default']['track_s']:.1f} s) with BLAS's own")
+                     f"{row['blas_default']['seconds']:.1f} s (track {row['blas_default']['track_s']:.1f} s) "
+                     "with BLAS's own")
     finally:
         if before is None:
             os.environ.pop(BLAS_THREADS_ENV, None)
         else:
             os.environ[BLAS_THREADS_ENV] = before
     return out
+
+
+def run_long_take_benchmark(n_frames: int = 3600, progress=print) -> dict:
+    """The whole ``mirrorcap track`` on a long take: the bench performance rendered for ``n_frames``
+    frames (3600: a minute at 60 frames/s), once, in a fresh process so that its peak resident
+    memory is the take's own. Speed, peak memory and accuracy against the truth."""
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    with ProcessPoolExecutor(max_workers=1, mp_context=get_context("spawn")) as pool:
+        out = pool.submit(_long_take, n_frames).result()
+    progress(f"  long take, {n_frames} frames 1280x720: {out['frames_per_s']:.0f} frames/s, peak resident memory "
+             f"{out['peak_rss_mb']:.0f} MB (detect {out['detect_s']:.1f} s, track {out['track_s']:.1f} s), "
+             f"RMS {out['rms_mm']:.3f} mm, {out['identity_switches']} switches")
+    return out
+
+
+def _long_take(n_frames: int) -> dict:
+    import resource
+    import tempfile
+
+    from mirrorcap.core.capture.video import open_source
+    from mirrorcap.core.take.c3d import read_c3d
+    from mirrorcap.core.track.pipeline import run_track
+    from mirrorcap.synthetic.evaluate import score_take
+
+    with tempfile.TemporaryDirectory() as tmp:
+        video = Path(tmp) / "long.mp4"
+        rig, truth = render_performance_mp4(video, n_frames)
+        source = open_source(video)
+        t0 = time.perf_counter()
+        report = run_track(source, rig.camera, Path(tmp) / "take.c3d", report=Path(tmp) / "take.json")
+        seconds = time.perf_counter() - t0
+        take = read_c3d(Path(tmp) / "take.c3d")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0    # kB on Linux
+    s = score_take(take["points"], truth, rig.camera, conjectured=take["conjectured"])
+    return {"frames": n_frames, "size": list(rig.camera.image_size), "seconds": seconds,
+            "frames_per_s": n_frames / seconds, "peak_rss_mb": peak, "detect_s": report["timings_s"]["detect"],
+            "track_s": report["timings_s"]["track"], "track_stages_s": report["timings_s"]["track_stages"],
+            **{k: s[k] for k in ("markers_tracked", "identity_switches", "measured_marker_frames", "rms_mm", "max_mm")}}

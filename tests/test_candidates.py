@@ -94,6 +94,26 @@ def test_clip_band_search_finds_exactly_the_pairs_of_a_full_comparison():
         assert wide.size > 1.5 * i.size
 
 
+def test_a_clips_candidates_in_blocks_of_frames_are_those_of_the_whole_clip():
+    """clip_candidates works in blocks of frames (a long take's working arrays stay bounded): every block
+    size gives the same candidates, in the same order, with global blob indices and frame offsets, as one
+    pass over the clip -- a block boundary that splits no frame, and a last block shorter than the rest."""
+    from mirrorcap.core.capture.views import ClipDetections
+    from mirrorcap.core.track.candidates import clip_candidates
+
+    rig = face_rig(n_markers=300, seed=3, layout="even")
+    _, frames = synthetic_detections(rig, 23, noise_px=0.1, seed=7, missing=0.1, false_blobs=0.5)
+    det = ClipDetections.from_frames(frames, rig.camera)
+    normals = np.stack([n for n, _ in rig.planes])
+    ds = np.array([d for _, d in rig.planes])
+    whole = clip_candidates(det, normals, ds, rig.camera.focal_px, block_frames=len(frames))
+    assert len(whole.points) > 300 * len(frames) and (whole.mirror_blob >= 0).all(axis=1).sum() > 30 * len(frames)
+    for block in (1, 5, 22):
+        part = clip_candidates(det, normals, ds, rig.camera.focal_px, block_frames=block)
+        for name in ("points", "direct", "mirror_blob", "residual_px", "frame", "start"):
+            assert np.array_equal(getattr(part, name), getattr(whole, name)), (block, name)
+
+
 def test_fused_candidates_need_both_mirrors_to_agree_on_depth(frame):
     """A direct blob with a partner in each mirror fuses them only when both mirrors put
     it at one depth: a chance blob in one mirror's band is tens of mm off."""

@@ -113,10 +113,38 @@ class ClipCandidates(Candidates3D):
         return slice(int(self.start[f]), int(self.start[f + 1]))
 
 
+#: frames per block of :func:`clip_candidates`: its working arrays (every pair in every band) are ~4x its
+#: result; in blocks a long take's stay bounded (a 3600-frame, 240-marker take: 413 MB at the peak in one block)
+CANDIDATE_BLOCK_FRAMES = 600
+
+
 def clip_candidates(det: ClipDetections, normals, ds, focal_px: float, band_px: float = 1.0,
-                    depth_range=None, agree_mm: float | None = 2.0) -> ClipCandidates:
-    """3D candidates (procedure step 4) of every frame of a clip in one vectorised pass:
-    the same pairs and points as :func:`frame_candidates` frame by frame.
+                    depth_range=None, agree_mm: float | None = 2.0,
+                    block_frames: int = CANDIDATE_BLOCK_FRAMES) -> ClipCandidates:
+    """3D candidates (procedure step 4) of every frame of a clip, vectorised over blocks of
+    ``block_frames`` frames (:func:`_block_candidates`): the same pairs and points as
+    :func:`frame_candidates` frame by frame, in the same order whatever the block size."""
+    F = det.n_frames
+    if F <= block_frames:
+        return _block_candidates(det, normals, ds, focal_px, band_px, depth_range, agree_mm)
+    parts = []
+    for a in range(0, F, block_frames):
+        c = _block_candidates(det.window(a, a + block_frames), normals, ds, focal_px, band_px, depth_range, agree_mm)
+        first_blob = [int(s[a]) for s in det.start]               # the window's blob 0 in each view
+        parts.append((c, a, first_blob))
+    K = len(normals)
+    points = np.concatenate([c.points for c, _, _ in parts])
+    direct = np.concatenate([c.direct + lo[0] for c, _, lo in parts])
+    blobs = np.concatenate([np.where(c.mirror_blob >= 0, c.mirror_blob + np.asarray(lo[1:K + 1]), -1)
+                            for c, _, lo in parts])
+    residual = np.concatenate([c.residual_px for c, _, _ in parts])
+    frame = np.concatenate([c.frame + a for c, a, _ in parts])
+    return ClipCandidates(points, direct, blobs, residual, frame, np.searchsorted(frame, np.arange(F + 1)))
+
+
+def _block_candidates(det: ClipDetections, normals, ds, focal_px: float, band_px: float = 1.0,
+                      depth_range=None, agree_mm: float | None = 2.0) -> ClipCandidates:
+    """:func:`clip_candidates` of the frames of ``det`` in one vectorised pass.
 
     A fused candidate (one direct blob with a partner in each mirror) is kept only when
     the two mirrors put the direct blob at the same point: the single-mirror depths

@@ -266,6 +266,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         n_rigid = max(8, int(round(s.rigid_fraction * len(motion))))
         given = np.argsort(motion)[:n_rigid]
     markers = add_late_markers(det, cands, s, markers, first, camera.focal_px, planes=(normals, ds))
+    del first                                          # its (frames, markers) arrays: a long take's memory
     if by_image:  # markers found later may be rigid too
         given = rigid_by_image(camera, markers[1], markers[2], *rigid)
     lap("late_markers")
