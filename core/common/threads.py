@@ -49,9 +49,12 @@ def limited_blas():
     if n == 0:
         yield
         return
-    import numpy  # noqa: F401  -- both BLAS libraries loaded, so that the limit reaches them
-    import scipy.linalg  # noqa: F401
+    import importlib
+
     from threadpoolctl import threadpool_limits
+
+    for name in ("numpy", "scipy.linalg"):           # both BLAS libraries loaded, so that the limit reaches them
+        importlib.import_module(name)
 
     with threadpool_limits(limits=n, user_api="blas"):
         yield
