@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import bpy
-import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.face.animate import animate_take, head_pose_from_report, unseen_policy
