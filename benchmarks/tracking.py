@@ -8,6 +8,7 @@ Synthetic 300-marker performances (core.simulate.rig_performance: 10 deg head tu
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -179,6 +180,19 @@ STRESS_CLIPS = Path(__file__).resolve().parents[1] / "sample_scenes" / "stress"
 NORMAL_CLIPS = Path(__file__).resolve().parents[1] / "sample_scenes" / "normal"   # issue #21
 
 
+def _rendered_clip(clip: Path) -> tuple:
+    """A clip folder of ``make_rig_clip.py``: ``(camera, view layout, light)``; the normal-light clips' clip.json
+    says ``"light": "normal"``."""
+    import json
+
+    from mirrorcap.core.capture.rig import load_rig_views
+    from mirrorcap.core.geometry.camera import Camera
+
+    camera = Camera.from_dict(json.loads((clip / "camera.json").read_text()))
+    made = json.loads((clip / "clip.json").read_text()) if (clip / "clip.json").is_file() else {}
+    return camera, load_rig_views(clip / "rig.json"), made.get("light", "uv")
+
+
 def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> dict:
     """The whole ``mirrorcap track`` (mirrors self-calibrated, RIG.json's views) on each rendered
     stress clip (``make stress-clips``), ``repeats`` times: speed, and accuracy and completeness
@@ -186,14 +200,11 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
     split over two labels, and the share of the marker-frames seen in the direct view and a
     mirror (truth.npz ``visible``) that the take reports. A clip the product refuses is recorded with
     its message (``refused``)."""
-    import json
     import tempfile
 
     from mirrorcap.core.capture.markers import ExtractionSettings
-    from mirrorcap.core.capture.rig import load_rig_views
     from mirrorcap.core.capture.video import open_source
     from mirrorcap.core.common.errors import MirrorCapError
-    from mirrorcap.core.geometry.camera import Camera
     from mirrorcap.core.take.c3d import read_c3d
     from mirrorcap.core.track.pipeline import run_track
     from mirrorcap.synthetic.evaluate import score_take
@@ -204,12 +215,9 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
                if (p / "clip.mp4").is_file() and (p / "truth.npz").is_file()]
     out = {}
     for clip in folders:
-        camera = Camera.from_dict(json.loads((clip / "camera.json").read_text()))
+        camera, layout, light = _rendered_clip(clip)
         truth = np.load(clip / "truth.npz")
         source = open_source(clip / "clip.mp4")
-        layout = load_rig_views(clip / "rig.json")
-        made = json.loads((clip / "clip.json").read_text()) if (clip / "clip.json").is_file() else {}
-        light = made.get("light", "uv")                # the normal-light clips of issue #21 say "normal"
         times, reports = [], []
         name = clip.name if light == "uv" else f"normal-light {clip.name}"
         with tempfile.TemporaryDirectory() as tmp:
@@ -262,6 +270,25 @@ def _keep_a_core_busy(stop) -> None:
             x += 1
 
 
+@contextmanager
+def _cores_kept_busy(busy: int):
+    """``busy`` other processes spinning (:func:`_keep_a_core_busy`) while the block runs."""
+    from multiprocessing import get_context
+
+    ctx = get_context("spawn")
+    stop = ctx.Event()
+    hogs = [ctx.Process(target=_keep_a_core_busy, args=(stop,), daemon=True) for _ in range(busy)]
+    for h in hogs:
+        h.start()
+    try:
+        time.sleep(0.5)                                  # spun up before the timing starts
+        yield
+    finally:
+        stop.set()
+        for h in hogs:
+            h.join()
+
+
 LOADED_CLIPS = (STRESS_CLIPS / "tilt630", STRESS_CLIPS / "dense", NORMAL_CLIPS / "light")
 
 
@@ -270,50 +297,33 @@ def run_loaded_track_benchmark(clips=LOADED_CLIPS, busy: int = 2, progress=print
     core of this 2-core machine busy (as a render, a second take or a batch would): with the
     core's one BLAS thread (``core.common.threads``, the default) and with BLAS's own thread count
     (``MIRRORCAP_BLAS_THREADS=0``, what the tracker did before). Seconds and frames/s of each."""
-    import json
     import os
     import tempfile
-    from multiprocessing import get_context
 
     from mirrorcap.core.capture.markers import ExtractionSettings
-    from mirrorcap.core.capture.rig import load_rig_views
     from mirrorcap.core.capture.video import open_source
     from mirrorcap.core.common.threads import BLAS_THREADS_ENV
-    from mirrorcap.core.geometry.camera import Camera
     from mirrorcap.core.track.pipeline import run_track
 
     out = {}
-    ctx = get_context("spawn")
     before = os.environ.get(BLAS_THREADS_ENV)
     try:
         for clip in map(Path, clips):
             if not (clip / "clip.mp4").is_file():
                 continue
-            camera = Camera.from_dict(json.loads((clip / "camera.json").read_text()))
-            made = json.loads((clip / "clip.json").read_text()) if (clip / "clip.json").is_file() else {}
-            settings = ExtractionSettings(light=made.get("light", "uv"))
+            camera, layout, light = _rendered_clip(clip)
             row = {}
             for name, value in (("one_blas_thread", None), ("blas_default", "0")):
                 if value is None:
                     os.environ.pop(BLAS_THREADS_ENV, None)
                 else:
                     os.environ[BLAS_THREADS_ENV] = value
-                stop = ctx.Event()
-                hogs = [ctx.Process(target=_keep_a_core_busy, args=(stop,), daemon=True) for _ in range(busy)]
-                for h in hogs:
-                    h.start()
-                try:
-                    time.sleep(0.5)
-                    with tempfile.TemporaryDirectory() as tmp:
-                        t0 = time.perf_counter()
-                        rep = run_track(open_source(clip / "clip.mp4"), camera, Path(tmp) / "take.c3d",
-                                        report=Path(tmp) / "take.json", layout=load_rig_views(clip / "rig.json"),
-                                        extraction=settings)
-                        seconds = time.perf_counter() - t0
-                finally:
-                    stop.set()
-                    for h in hogs:
-                        h.join()
+                with _cores_kept_busy(busy), tempfile.TemporaryDirectory() as tmp:
+                    t0 = time.perf_counter()
+                    rep = run_track(open_source(clip / "clip.mp4"), camera, Path(tmp) / "take.c3d",
+                                    report=Path(tmp) / "take.json", layout=layout,
+                                    extraction=ExtractionSettings(light=light))
+                    seconds = time.perf_counter() - t0
                 frames = rep["frames"]["count"]
                 row[name] = {"seconds": seconds, "frames_per_s": frames / seconds,
                              "detect_s": rep["timings_s"]["detect"], "track_s": rep["timings_s"]["track"]}

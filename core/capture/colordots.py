@@ -82,10 +82,10 @@ def hue_apart(hue_a, hue_b) -> np.ndarray:
 
 
 
-def split_by_colour(lab, n_blobs: int, chroma, xs, ys, weight, class_hues, settings) -> tuple:
+def split_by_colour(lab, n_blobs: int, hue, xs, ys, weight, class_hues, settings) -> tuple:
     """Step 3's blobs ``lab`` ``(n,)`` (of ``n_blobs``) of the candidate pixels at ``xs``, ``ys``, each split by
-    colour where dots of two classes touch: ``(labels (n,), count, weight (n,))``. A pixel whose hue (``chroma``:
-    r, g, b summing to 1) lies within ``max_hue_deg`` of a class's (``class_hues``, radians:
+    colour where dots of two classes touch: ``(labels (n,), count, weight (n,))``. A pixel whose hue (``hue``,
+    radians: :func:`hue_saturation`) lies within ``max_hue_deg`` of a class's (``class_hues``, radians:
     :meth:`.ColorClasses.hue_centres`) is that class's. A blob is split where two classes or more each hold at
     least ``min_area`` such pixels, centred (by ``weight``) :data:`SPLIT_APART_PX` from the best-held class's and,
     nearer than :data:`SPLIT_FAR_PX`, holding :data:`SPLIT_SHARE` of the blob's weight: every such class a blob
@@ -99,7 +99,7 @@ def split_by_colour(lab, n_blobs: int, chroma, xs, ys, weight, class_hues, setti
     n_classes = len(class_hues)
     if lab.size == 0 or n_blobs == 0 or n_classes < 2 or settings.max_hue_deg >= 180.0:
         return lab, n_blobs, weight
-    apart = hue_apart(hue_saturation(chroma)[0][:, None], np.asarray(class_hues)[None])     # (n, C)
+    apart = hue_apart(np.asarray(hue)[:, None], np.asarray(class_hues)[None])              # (n, C)
     cls = np.argmin(apart, axis=1)
     own = apart[np.arange(cls.size), cls] <= np.radians(settings.max_hue_deg)
     cell = lab[own] * n_classes + cls[own]
@@ -159,9 +159,9 @@ class ColorDotExtractor:
         return cv2.resize(med, (w, h), interpolation=cv2.INTER_LINEAR)
 
     def candidates(self, frame_bgr: np.ndarray):
-        """Step 2: ``(idx, contrast, value, bgr, background)`` of the candidate dot pixels -- flat
+        """Step 2: ``(idx, contrast, value, bgr, background, hue)`` of the candidate dot pixels -- flat
         pixel indices, their chromaticity distance ``|c - c_bg|`` from the local background, their
-        brightest channel, and their colour and the background's (float32 BGR). Only pixels whose colour differs from the background by more than
+        brightest channel, their colour and the background's (float32 BGR), and their hue (radians). Only pixels whose colour differs from the background by more than
         ``min_difference`` levels in some channel, averaged over 3x3 pixels, are looked at (a fast
         first cut; a dot differs from skin by far more)."""
         cv2 = self._cv2
@@ -186,16 +186,17 @@ class ColorDotExtractor:
         # joined to a dot beside it pulled the blob's centre 8 px off (full HD: a blue dot at the jaw line
         # never tracked). Below twice min_value a pixel's hue is noise: there the test is left out (a dark
         # region cut into its noisy pieces gave the light clip a false dot at a view boundary)
-        from_skin = np.degrees(hue_apart(hue_saturation(px[:, ::-1])[0], hue_saturation(pb[:, ::-1])[0]))
+        hue = hue_saturation(px[:, ::-1])[0]
+        from_skin = np.degrees(hue_apart(hue, hue_saturation(pb[:, ::-1])[0]))
         ok &= (from_skin >= FROM_SKIN_DEG) | (value < 2.0 * s.min_value)
-        return idx[ok], contrast[ok], value[ok], px[ok], pb[ok]
+        return idx[ok], contrast[ok], value[ok], px[ok], pb[ok], hue[ok]
 
     def __call__(self, frame_bgr: np.ndarray):
         cv2 = self._cv2
         s = self.settings
         if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:
             raise InputError("frames must be 8-bit BGR images")
-        idx, contrast, value, bgr, bg = self.candidates(frame_bgr)
+        idx, contrast, value, bgr, bg, hue = self.candidates(frame_bgr)
         if idx.size == 0:
             return empty_detections()
         h, w = frame_bgr.shape[:2]
@@ -211,7 +212,7 @@ class ColorDotExtractor:
         # over a length-3 axis cost more than the arithmetic)
         chroma = bgr[:, ::-1] / np.maximum(bgr[:, 0] + bgr[:, 1] + bgr[:, 2], 1.0)[:, None]
         bg_chroma = bg[:, ::-1] / np.maximum(bg[:, 0] + bg[:, 1] + bg[:, 2], 1.0)[:, None]
-        lab, m, wgt = split_by_colour(labels.ravel().take(idx) - 1, n - 1, chroma, xs, ys, wgt, self._class_hues, s)
+        lab, m, wgt = split_by_colour(labels.ravel().take(idx) - 1, n - 1, hue, xs, ys, wgt, self._class_hues, s)
         sums = np.stack([np.bincount(lab, wgt, m), np.bincount(lab, wgt * xs, m), np.bincount(lab, wgt * ys, m),
                          np.bincount(lab, None, m), np.bincount(lab, value, m),
                          *(np.bincount(lab, wgt * chroma[:, c], m) for c in range(3)),

@@ -130,13 +130,12 @@ def clip_candidates(det: ClipDetections, normals, ds, focal_px: float, band_px: 
     parts = []
     for a in range(0, F, block_frames):
         c = _block_candidates(det.window(a, a + block_frames), normals, ds, focal_px, band_px, depth_range, agree_mm)
-        first_blob = [int(s[a]) for s in det.start]               # the window's blob 0 in each view
+        first_blob = np.array([s[a] for s in det.start])          # the window's blob 0 in each view
         parts.append((c, a, first_blob))
-    K = len(normals)
     points = np.concatenate([c.points for c, _, _ in parts])
-    direct = np.concatenate([c.direct + lo[0] for c, _, lo in parts])
-    blobs = np.concatenate([np.where(c.mirror_blob >= 0, c.mirror_blob + np.asarray(lo[1:K + 1]), -1)
-                            for c, _, lo in parts])
+    direct = np.concatenate([c.direct + first_blob[0] for c, _, first_blob in parts])
+    blobs = np.concatenate([np.where(c.mirror_blob >= 0, c.mirror_blob + first_blob[1:], -1)
+                            for c, _, first_blob in parts])
     residual = np.concatenate([c.residual_px for c, _, _ in parts])
     frame = np.concatenate([c.frame + a for c, a, _ in parts])
     return ClipCandidates(points, direct, blobs, residual, frame, np.searchsorted(frame, np.arange(F + 1)))

@@ -14,7 +14,7 @@ from ..geometry.rigid import rotation_zyx, to_head_frame
 from ..capture.views import ClipDetections, frame_spaced
 from .candidates import ClipCandidates
 from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
-from .onface import along_ray, face_offset, off_in_mirrors, off_the_face
+from .onface import along_ray, beyond, face_offset, off_in_mirrors, off_the_face
 from .pairing import candidate_tracks
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, keep_measured
 
@@ -160,7 +160,8 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
         seen_then = first_pass.points[f[q]][real]
         seen_then = seen_then[np.all(np.isfinite(seen_then), axis=1)]
         point, views_then = cands.points[idx[q]], np.where(real, first_pass.camera_mask[f[q]], 0)
-        if off_the_face(seen_then, point, off_face_mm) and (
+        offset = face_offset(seen_then, point)
+        if beyond(offset, off_face_mm) and (
                 planes is None or off_in_mirrors(first_pass.points[f[q]], views_then, point,
                                                   cands.mirror_blob[idx[q]] >= 0, planes, off_face_mm)):
             continue
@@ -173,7 +174,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
                 seen_from[same] = min(seen_from[same], first_f[c])
                 continue
         tracks_c = direct_track[cand_of[rows]]
-        face_off[c] = face_offset(seen_then, point)[0]
+        face_off[c] = offset[0]
         rival = _rival(owner[tracks_c], at_rest, c, R[q].T @ (point / np.linalg.norm(point)))
         if rival >= 0:
             if not face_off[c] + RIVAL_NEARER_MM < face_off[rival]:     # NaN: the rival stays

@@ -37,10 +37,15 @@ def face_offset(neutral, point, k: int = FACE_MARKERS) -> tuple:
 
 def off_the_face(neutral, point, off_mm: float, k: int = FACE_MARKERS) -> bool:
     """Is ``point`` more than ``off_mm`` along its ray from the face formed by the markers ``neutral``
-    (:func:`face_offset`)? Where the plane fits its markers loosely (the face curving away, at the
-    silhouette) the limit grows to 4x that misfit. With fewer than ``k`` markers nothing is decided."""
-    distance, misfit = face_offset(neutral, point, k)
-    return bool(distance > max(off_mm, 4.0 * misfit))       # False where NaN
+    (:func:`face_offset`, :func:`beyond`)? With fewer than ``k`` markers nothing is decided."""
+    return beyond(face_offset(neutral, point, k), off_mm)
+
+
+def beyond(offset, off_mm: float) -> bool:
+    """Is a :func:`face_offset` ``(distance, misfit)`` more than ``off_mm``? Where the plane fits its markers
+    loosely (the face curving away, at the silhouette) the limit grows to 4x that misfit. False where NaN."""
+    distance, misfit = offset
+    return bool(distance > max(off_mm, 4.0 * misfit))
 
 
 def off_in_mirrors(markers, views, point, used, planes, off_mm: float) -> bool:
