@@ -142,7 +142,9 @@ stress-clips: $(STAMP)
 # 170 dots of 2.8 mm, mirrors at 43 deg, +-12 deg yaw, 90 frames; rendered at stop 36); tan720, held out (1280x720,
 # a tanned skin of sRGB 190,140,110, 190 dots of 2.7 mm, mirrors at 44 deg, +-12 deg yaw, 90 frames; rendered at
 # stop 38); deep720 (1280x720, a deep skin of sRGB 110,75,55, 200 dots of 2.6 mm, mirrors at 42 deg, +-12 deg yaw,
-# 90 frames; rendered at stop 38). About 75 minutes.
+# 90 frames; rendered at stop 38); ruddy540 (960x540, a ruddy skin, 200 dots of 2.8 mm, mirrors at 46 deg; stop 39);
+# small540 (960x540, medium skin, 240 dots of 2.2 mm 700 mm away -- 3.2 px across, 2.5-2.8 px in the mirrors: too
+# small for the detector under normal light, kept to check that the take says so; stop 40). About 85 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -163,4 +165,7 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 160,110,90 --out sample_scenes/normal/ruddy540 \
 		--size 960 540 --focal 820 --markers 200 --marker-mm 2.8 --mirror-deg 46 --distance 620 --head-deg 10 12 7 \
 		--tempo 1.8 --frames 90 --samples 4 --seed 481 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin medium --out sample_scenes/normal/small540 \
+		--size 960 540 --focal 800 --markers 240 --marker-mm 2.2 --mirror-deg 48 --distance 700 --head-deg 8 14 6 \
+		--tempo 1.5 --frames 90 --seed 503 --no-scan
 

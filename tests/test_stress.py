@@ -47,6 +47,7 @@ def test_a_take_whose_mirror_scales_disagree_is_flagged(tmp_path, capsys):
     assert abs(agree["median_difference"]) < agree["expected_sd"]
     assert "mirrors disagree" not in text and not any("disagree" in w for w in good["warnings"])
     assert good["mirror_scale_link"] is None  # planes from the file: nothing linked
+    assert good["coverage"]["enough"] is True and good["coverage"]["measured_share"] > 0.9
     bad, text = runs["scaled"]
     agree = bad["mirror_agreement"]
     assert agree["consistent"] is False
@@ -290,6 +291,11 @@ def test_the_head_motion_link_matches_the_shared_marker_link_and_refuses_a_still
     still = ClipDetections.of([frames[0]] * 40, camera)
     with pytest.raises(DegenerateError, match="moves too little"):
         link_mirror_scales_by_motion(still, camera, normals, ds)
+    # frames out of order: no 2D track lasts, and the error says how few are held and how large the dots are
+    shuffled = ClipDetections.of([frames[i] for i in np.random.default_rng(0).permutation(len(frames))], camera)
+    with pytest.raises(DegenerateError, match=r"tracked in each mirror at once .* where 6 are needed; the dots "
+                                              r"measure [\d.]+ px across in the direct view"):
+        link_mirror_scales_by_motion(shuffled, camera, normals, ds)
 
 
 def test_the_clip_makers_view_split_puts_the_fewest_dots_in_the_wrong_view():

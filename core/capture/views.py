@@ -97,6 +97,13 @@ class ClipDetections:
     def __len__(self) -> int:
         return self.n_frames
 
+    def typical_dot_px(self, view: int) -> float | None:
+        """The diameter (pixels) of a disc of the median blob's area in ``view``; None where the detections carry
+        no areas (the add-on's 2D tracks) or the view has no blob."""
+        if self.area is None or len(self.area[view]) == 0:
+            return None
+        return float(2.0 * np.sqrt(np.median(self.area[view]) / np.pi))
+
     def typical_spacing(self, view: int, focal_px: float | None = None, frames: int = 20) -> float:
         """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,
         of any colour, over ``frames`` frames spread over the clip: undistorted (``norm`` times

@@ -30,6 +30,7 @@ from ..common.errors import DegenerateError
 from ..geometry.camera import Camera
 from ..geometry.mirror import depths_from_planes
 from ..geometry.rigid import rigid_fit
+from .coverage import dot_sizes
 from .pairing import paired_tracks, partner_blobs
 
 WINDOW_FRAMES = 15       # frames per window of 2D tracks (as the tracker's initial pairing)
@@ -207,11 +208,12 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     sub = det.window(0, min(frames, det.n_frames))
     pos = _one_mirror_points(sub, camera, normals, ds)
     seen = [np.isfinite(P[..., 0]) for P in pos]
-    t_pairs = [[], []]
+    t_pairs, in_common = [[], []], []
     F = sub.n_frames
     for a in range(0, F, 5):
         for b in range(a + 10, F, 10):
             common = [np.flatnonzero(s[a] & s[b]) for s in seen]
+            in_common.append([len(c) for c in common])
             if min(len(c) for c in common) < min_markers:
                 continue
             A = [pos[k][a, common[k]] for k in range(2)]
@@ -229,9 +231,15 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
                 t_pairs[k].append(B[k][keep[k]].mean(0) - R @ A[k][keep[k]].mean(0))
     markers = [int(s.any(0).sum()) for s in seen]
     if len(t_pairs[0]) < 5:
+        at_once = " and ".join(f"{v:.0f}" for v in np.median(np.reshape(in_common, (-1, 2)), axis=0)) \
+            if in_common else "none"
+        sizes = dot_sizes(det)
         raise DegenerateError(f"no marker is seen in both mirrors, and too few markers are tracked in each mirror "
-                              f"({markers[0]} and {markers[1]}) to relate the two mirrors' scales through the head's "
-                              "motion (give MIRRORS.json from `mirrorcap mirrors`)")
+                              f"at once to relate the two mirrors' scales through the head's motion ({markers[0]} and "
+                              f"{markers[1]} over the first {F} frames, but {at_once} held from a frame to the one 10 or more "
+                              f"later, typically, where {min_markers} are needed" + (f"; {sizes}" if sizes else "") + "): give "
+                              "MIRRORS.json from `mirrorcap mirrors`, or make the dots easier to find in the mirrors "
+                              "(larger dots, a closer camera or a higher resolution)")
     t0, t1 = np.array(t_pairs[0]), np.array(t_pairs[1])
     depth = float(np.nanmedian(pos[0][..., 2]))
     moved = float(np.median(np.linalg.norm(t0, axis=1)) / depth)

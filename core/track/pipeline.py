@@ -131,6 +131,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     (REPORT.json ``view_layout``; a warning when a boundary runs through dots)."""
     from .mirrorscale import (MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
                               link_mirror_scales_by_motion, mirror_agreement)
+    from .coverage import coverage_warning, take_coverage
     from .selfcal import self_calibrate_mirror
 
     if len(frames) < 2:
@@ -202,6 +203,10 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         log.warning(f"{len(dropped_seeds)} designation(s) of the seeds file did not hold ({', '.join(dropped_seeds[:6])}"
                     f"{', ...' if len(dropped_seeds) > 6 else ''}): their direct and mirror points are not one dot, or the "
                     "marker was lost; fix them in the clip (Take To Clip, rename the marker's tracks) and Re-solve")
+    coverage = take_coverage(det, result.assigned_blob >= 0)
+    short = coverage_warning(coverage, det)
+    if short:
+        log.warning(short)
     if result.undecided:
         log.warning(f"{len(result.undecided)} direct-view markers of the first frames could not be paired with a "
                     "mirror image (no 3D position): REPORT.json markers.undecided lists where they are")
@@ -211,6 +216,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     for k, p in enumerate(planes)],
         "mirror_scale_link": scale_link,
         "mirror_agreement": agreement,
+        "coverage": coverage,
         "view_layout": view_check,
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
