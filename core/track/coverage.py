@@ -5,9 +5,9 @@ A marker is measured in a frame when its dot in the direct view is paired with i
 every rig the project has rendered and tracked -- 35 clips, UV and normal light, 480 to 1080 lines, mirrors
 at 35-65 degrees -- a typical frame measures 53-99 % of the dots its direct view shows (the rest: dots no
 mirror sees, and the tracker's gaps). A take far below that tracks few of its dots and says little of the
-face, though every stage ran: the held-out small540 (normal light, 2.2 mm dots 2.5 px across in a 960x540
-frame, their mirror images 2.5-2.8 px) measured 1 %, 5 markers of 240, and the command ended as if it had
-worked. The dots' sizes go into the warning: under normal light, mirror images 3 px across or less lost most
+face, though every stage ran: the held-out small540 (normal light, 960x540, 2.2 mm dots 3.2 px across in
+the direct view and 2.5-2.8 px in the mirrors) measured 1 %, 5 markers of 240, and the command ended as if it
+had worked. The dots' sizes go into the warning: under normal light, mirror images 3 px across or less lost most
 of their dots on the clips measured (the video's halved colour resolution blends a dot that small into the
 skin), where 3.6 px kept them."""
 
@@ -57,8 +57,8 @@ def coverage_warning(coverage: dict, det) -> str | None:
     mirrors = " and ".join(f"{n:.0f}" for n in coverage["mirror_dots"])
     return (f"in a typical frame the take measures {coverage['measured']:.0f} of the {coverage['direct_dots']:.0f} "
             f"dots its direct view shows ({100 * coverage['measured_share']:.0f} %, where the rigs measured give "
-            f"{MEASURED_SHARE_SEEN}): most dots found no image in a mirror. "
-            f"The mirrors show {mirrors} dots a frame" + (f", and {sizes}" if sizes else "") + " -- dots too small or "
-            "too faint in the mirrors are missed (larger dots, a closer camera or a higher resolution: under normal "
-            "light, mirror images 3 px across or less lost most of their dots on the rigs measured), as are dots of a colour COLORS.json does "
-            "not hold and dots outside the rig file's views")
+            f"{MEASURED_SHARE_SEEN}): most dots found no image in a mirror. The mirrors show {mirrors} dots a frame"
+            + (f", and {sizes}" if sizes else "") + " -- dots too small or too faint in the mirrors are missed "
+            "(larger dots, a closer camera or a higher resolution: under normal light, mirror images 3 px across or "
+            "less lost most of their dots on the rigs measured), as are dots of a colour COLORS.json does not hold "
+            "and dots outside the rig file's views")

@@ -236,10 +236,11 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
         sizes = dot_sizes(det)
         raise DegenerateError(f"no marker is seen in both mirrors, and too few markers are tracked in each mirror "
                               f"at once to relate the two mirrors' scales through the head's motion ({markers[0]} and "
-                              f"{markers[1]} over the first {F} frames, but {at_once} held from a frame to the one 10 or more "
-                              f"later, typically, where {min_markers} are needed" + (f"; {sizes}" if sizes else "") + "): give "
-                              "MIRRORS.json from `mirrorcap mirrors`, or make the dots easier to find in the mirrors "
-                              "(larger dots, a closer camera or a higher resolution)")
+                              f"{markers[1]} over the first {F} frames, but {at_once} held from a frame to the one 10 "
+                              f"or more later, typically, where {min_markers} are needed"
+                              + (f"; {sizes}" if sizes else "") + "): give MIRRORS.json from `mirrorcap mirrors`, or "
+                              "make the dots easier to find in the mirrors (larger dots, a closer camera or a higher "
+                              "resolution)")
     t0, t1 = np.array(t_pairs[0]), np.array(t_pairs[1])
     depth = float(np.nanmedian(pos[0][..., 2]))
     moved = float(np.median(np.linalg.norm(t0, axis=1)) / depth)
