@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .detections import typical_dot_diameter_px
+
 
 #: a blob of at least this many times its typical dot's area (ClipDetections.area_share) is taken for two dots'
 #: images run into one, where a mirror sees the face at a grazing angle: its centre lies between them, and a point
@@ -102,7 +104,7 @@ class ClipDetections:
         no areas (the add-on's 2D tracks) or the view has no blob."""
         if self.area is None or len(self.area[view]) == 0:
             return None
-        return float(2.0 * np.sqrt(np.median(self.area[view]) / np.pi))
+        return typical_dot_diameter_px(self.area[view])
 
     def typical_spacing(self, view: int, focal_px: float | None = None, frames: int = 20) -> float:
         """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,
