@@ -124,7 +124,7 @@ def detect(args) -> int:
               f"{c['mirror1'] / n:.1f} mirror1, dots {sizes} px across ({report['frames_per_second']:.0f} frames/s)")
         for text in view_boundary_warnings(report["view_layout"]):
             print(f"  warning: {text}")
-        small = small_dot_warning(report)
+        small = small_dot_warning(light, report["dot_px"])
         if small:
             print(f"  warning: {small}")
     return 0

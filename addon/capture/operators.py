@@ -89,7 +89,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
 
     def run(self, context):
         from ...core.capture.markers import marker_extractor
-        from ...core.capture.detect import dot_diameter_px
+        from ...core.capture.detect import dot_diameter_px, dot_px_by_view, small_dot_warning
         from ...core.capture.rig import split_views_by_gaps
         from ...core.capture.video import open_source
         from ..common.clip import detections_to_clip_tracks, find_clip
@@ -112,8 +112,13 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         clip = find_clip(video)
         count = detections_to_clip_tracks(clip, n, det.x, det.y, det.color, view, source.size)
         per_view = np.bincount(view[view >= 0], minlength=3)
-        return (f"frame {n}: {count} markers ({per_view[0]} direct, {per_view[1]} mirror 0, {per_view[2]} mirror 1) "
-                "shown as tracks of the clip's 'MirrorCap' object")
+        dot_px = dot_px_by_view(det.area, view)
+        small = small_dot_warning(s.light, dot_px)
+        if small:
+            self.messages.warning(small)
+        sizes = ", ".join("-" if p is None else f"{p:.1f}" for p in dot_px.values())
+        return (f"frame {n}: {count} markers ({per_view[0]} direct, {per_view[1]} mirror 0, {per_view[2]} mirror 1; "
+                f"dots {sizes} px across) shown as tracks of the clip's 'MirrorCap' object")
 
 
 class MIRRORCAP_OT_solve_mirrors(MirrorCapJobOperator):

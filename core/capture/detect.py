@@ -183,7 +183,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
     counts = np.zeros(len(VIEW_NAMES) + 1, dtype=np.int64)  # last: outside every view
     t_write = 0.0
     xs = XHistogram()                                       # the detections' x, for the layout check
-    areas = [[] for _ in VIEW_NAMES]                        # each view's blob areas, for its typical dot
+    areas, area_views = [], []                              # the blobs' areas and views, for each view's typical dot
     fd, tmp = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".tmp", dir=output.parent)
     t_start = time.perf_counter()
     try:
@@ -194,8 +194,8 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
                 counts[-1] += np.count_nonzero(view < 0)
                 xs.add(det.x)
                 ok = view >= 0
-                for v in range(len(VIEW_NAMES)):
-                    areas[v].append(det.area[view == v])
+                areas.append(det.area[ok])
+                area_views.append(view[ok])
                 t0 = time.perf_counter()
                 fh.write(format_detection_rows(n, view[ok], det.x[ok], det.y[ok], det.color[ok], det.area[ok],
                                                det.intensity[ok], color_names=colors.names))
@@ -221,7 +221,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
             "colors": colors.to_dict(),
             "settings": asdict(settings),
             "counts": {**{v: int(c) for v, c in zip(VIEW_NAMES, counts)}, "outside_views": int(counts[-1])},
-            "dot_px": {name: typical_dot_diameter_px(np.concatenate(a)) or None for name, a in zip(VIEW_NAMES, areas)},
+            "dot_px": dot_px_by_view(np.concatenate(areas), np.concatenate(area_views)),
             "timings_s": {"total": elapsed, "extract": t_extract, "write": t_write,
                           "decode_and_other": elapsed - t_extract - t_write},
             "frames_per_second": done / elapsed if elapsed > 0 else None,
@@ -243,12 +243,17 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
 NORMAL_LIGHT_MIN_DOT_PX = 3.3
 
 
-def small_dot_warning(report: dict) -> str | None:
-    """The warning for a :func:`run_detection` report under normal light whose mirrors' median dots measure
-    under :data:`NORMAL_LIGHT_MIN_DOT_PX`; None otherwise."""
-    px = report.get("dot_px") or {}
-    small = {v: p for v, p in px.items() if v != "direct" and p is not None and p < NORMAL_LIGHT_MIN_DOT_PX}
-    if report["settings"].get("light") != "normal" or not small:
+def dot_px_by_view(area, view) -> dict:
+    """Each view's typical dot (:func:`.detections.typical_dot_diameter_px`) from blob areas ``area`` ``(n,)`` in
+    views ``view`` ``(n,)`` (indices into :data:`.rig.VIEW_NAMES`): ``{name: px or None}`` (None: no blob there)."""
+    return {name: typical_dot_diameter_px(area[view == v]) or None for v, name in enumerate(VIEW_NAMES)}
+
+
+def small_dot_warning(light: str, dot_px: dict) -> str | None:
+    """The warning when, under ``light`` ``"normal"``, a mirror's typical dot (``dot_px``, :func:`dot_px_by_view`)
+    measures under :data:`NORMAL_LIGHT_MIN_DOT_PX`; None otherwise."""
+    small = {v: p for v, p in dot_px.items() if v != "direct" and p is not None and p < NORMAL_LIGHT_MIN_DOT_PX}
+    if light != "normal" or not small:
         return None
     sizes = " and ".join(f"{p:.1f} px in {v}" for v, p in small.items())
     return (f"the mirrors' dots measure {sizes} (the median blob): under normal light, mirror images this small "
