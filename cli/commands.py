@@ -75,15 +75,18 @@ def calibrate(args) -> int:
 
     board = Board.parse(args.board)
     source, _, _ = _open(args)
+    if not args.max_focal_sd > 0:
+        raise MirrorCapError("--max-focal-sd must be a positive percentage")
     result = calibrate_camera(source, board, max_views=args.max_views, min_views=args.min_views,
-                              max_rms_px=args.max_rms)
+                              max_rms_px=args.max_rms, max_focal_sd_percent=args.max_focal_sd)
     write_files_atomically({Path(args.output): json.dumps(result.to_dict(), indent=2) + "\n"})
     if not args.quiet:
         K = result.camera.K
         print(f"calibrated from {result.views_used} of {result.views_tried} views, RMS reprojection error "
               f"{result.rms_px:.3f} px -> {args.output}")
-        print(f"  fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f}  "
-              f"dist {' '.join(f'{v:+.4f}' for v in result.camera.dist)}")
+        print(f"  fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f} (+-{result.focal_sd_percent:.2f} %)  cx {K[0, 2]:.2f}  "
+              f"cy {K[1, 2]:.2f}  dist {' '.join(f'{v:+.4f}' for v in result.camera.dist)}; the board turned "
+              f"{result.board_turn_deg:.0f} deg between views")
     return 0
 
 

@@ -137,6 +137,8 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--max-views", type=int, default=40, help="frames sampled evenly from the source (default 40)")
     cal.add_argument("--min-views", type=int, default=6, help="fewest views with the board found (default 6)")
     cal.add_argument("--max-rms", type=float, default=1.0, help="largest acceptable RMS reprojection error, px")
+    cal.add_argument("--max-focal-sd", type=float, default=0.5, metavar="PERCENT",
+                     help="largest acceptable standard deviation of the focal length, %% of it (default 0.5)")
     cal.set_defaults(func=commands.calibrate)
 
     det = sub.add_parser("detect", help="find the markers in every frame of a rig video",

@@ -171,8 +171,8 @@ def _rotation(rx, ry, rz):
 
 
 def render_board_views(camera: Camera, board, n_views: int, rng=None, distance_mm: float = 600.0,
-                       noise_sigma: float = 1.0):
-    """``n_views`` images of ``board`` in random poses (tilts up to 35 deg) seen by
+                       noise_sigma: float = 1.0, max_tilt_deg: float = 35.0):
+    """``n_views`` images of ``board`` in random poses (tilts up to ``max_tilt_deg`` about each axis) seen by
     ``camera`` (lens distortion included, by remapping an ideal render). Returns a
     list of 8-bit BGR images."""
     import cv2
@@ -192,7 +192,7 @@ def render_board_views(camera: Camera, board, n_views: int, rng=None, distance_m
         remap = (ideal[..., 0], ideal[..., 1])
     images = []
     for _ in range(n_views):
-        R = _rotation(*rng.uniform(-35, 35, 2), rng.uniform(-20, 20))
+        R = _rotation(*rng.uniform(-max_tilt_deg, max_tilt_deg, 2), rng.uniform(-20, 20))
         t = np.array([rng.uniform(-60, 60), rng.uniform(-40, 40), distance_mm * rng.uniform(0.85, 1.2)])
         t = t - R @ centre  # board centre at t
         H_board_to_img = camera.K @ np.c_[R[:, :2], t]
