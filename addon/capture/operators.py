@@ -76,7 +76,8 @@ class MIRRORCAP_OT_calibrate_camera(MirrorCapJobOperator):
     def finish(self, context, result):
         out, res = result
         scene_settings(context).camera = str(out)
-        return f"camera from {res.views_used} views, RMS {res.rms_px:.3f} px -> {out.name}"
+        return (f"camera from {res.views_used} views, RMS {res.rms_px:.3f} px, focal length "
+                f"+-{res.focal_sd_percent:.2f} % (the board turned {res.board_turn_deg:.0f} deg) -> {out.name}")
 
 
 class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
