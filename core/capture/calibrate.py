@@ -16,10 +16,10 @@ poor calibration.
 
 Views of the board in parallel planes -- all face-on, say -- cannot tell the focal length from the board's
 distance (Zhang's method needs the board's plane to turn): ten views of a chessboard tilted at most 1 deg
-from face-on gave a focal length 10 % off with
-a 0.013 px reprojection error and a standard deviation OpenCV put at 0.001 %. On the rig, a focal length
-1 % off distorts a take by 0.2 mm RMS after one similarity, 2 % by 0.4 mm and 5 % by 0.9-1.0 mm (the dense,
-tele900 and hd clips tracked with a scaled focal length; stop 40), and nothing in the take can tell.
+from face-on gave a focal length 10 % off with a 0.013 px reprojection error and a standard deviation OpenCV
+put at 0.001 %. On the rig, a focal length 1 % off distorts a take by 0.2 mm RMS after one similarity, 2 % by
+0.4 mm and 5 % by 0.9-1.0 mm (the dense, tele900 and hd clips tracked with a scaled focal length; stop 40),
+and nothing in the take can tell.
 """
 
 from __future__ import annotations
@@ -161,7 +161,7 @@ def calibrate_camera(source: VideoSource, board: Board, *, max_views: int = 40, 
         raise DegenerateError(f"calibration reprojection error {rms:.3f} px exceeds {max_rms_px:g} px; "
                               "use sharper views, more board poses or check the board size")
     normals = np.array([cv2.Rodrigues(r)[0][:, 2] for r in rvecs])   # each view's board normal, camera frame
-    turn = float(np.degrees(np.arccos(np.clip((normals @ normals.T).min(), -1.0, 1.0))))
+    turn = float(np.degrees(np.arccos(min(1.0, np.abs(normals @ normals.T).min()))))   # planes: the normals' sign aside
     if turn < MIN_BOARD_TURN_DEG:
         raise DegenerateError(f"the board's plane turns only {turn:.1f} deg between the views: boards in parallel "
                               "planes (all face-on, say) cannot tell the focal length from the board's distance -- "
