@@ -660,3 +660,38 @@ def test_a_measurement_its_neighbours_disown_is_re_paired_onto_its_dots_own_imag
     both.camera_mask[:] = 7                                              # every measurement through both mirrors
     both = doubt_outlying_measurements(both, 40.0, cands)
     assert both.stats["repaired"].tolist() == [0] * 4 and both.stats["doubted"].tolist() == [0] * 4
+
+
+def test_coverage_of_a_take_counts_frames_with_dots_and_names_sizes_only_when_known():
+    """core.track.coverage: the share is a median over the frames whose direct view shows a dot (a frame without
+    one does not drag it to 0), the warning comes under MIN_MEASURED_SHARE only, and detections without areas (the
+    add-on's 2D tracks) give no sizes rather than made-up ones."""
+    from mirrorcap.core.capture.views import ClipDetections, FrameDets
+    from mirrorcap.core.geometry.camera import Camera
+    from mirrorcap.core.track.coverage import MIN_MEASURED_SHARE, coverage_warning, take_coverage
+
+    camera = Camera.ideal(1000.0, (640, 480))
+    xy = np.c_[np.arange(10) * 20.0 + 100, np.full(10, 240.0)]
+
+    def frames(n_direct, with_area):
+        out = []
+        for n in n_direct:
+            area = dict(direct_area=np.full(n, 12.0), mirror_area=[np.full(4, 7.0), np.full(3, 7.0)]) if with_area \
+                else {}
+            out.append(FrameDets(xy[:n], np.zeros(n, int), [xy[:4], xy[:3]], [np.zeros(4, int), np.zeros(3, int)],
+                                 **area))
+        return out
+
+    det = ClipDetections.of(frames([10, 0, 0, 0, 10], True), camera)   # three frames show no dot
+    measured = np.zeros((5, 12), bool)
+    measured[[0, 4], :2] = True                              # 2 of 10 direct dots measured: 20 %
+    cov = take_coverage(det, measured)
+    assert cov["measured_share"] == pytest.approx(0.2) and cov["direct_dots"] == 10 and cov["mirror_dots"] == [4, 3]
+    assert cov["enough"] is False and cov["dot_px"][0] == pytest.approx(2 * np.sqrt(12 / np.pi))
+    text = coverage_warning(cov, det)
+    assert "measures 2 of the 10 dots" in text and "3.9 px across in the direct view, 3.0 and 3.0 px" in text
+    measured[[0, 4], :int(np.ceil(10 * MIN_MEASURED_SHARE))] = True
+    assert coverage_warning(take_coverage(det, measured), det) is None
+    bare = ClipDetections.of(frames([10, 10], False), camera)
+    cov = take_coverage(bare, np.zeros((2, 12), bool))
+    assert cov["dot_px"] == [None, None, None] and "the dots measure" not in coverage_warning(cov, bare)

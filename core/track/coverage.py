@@ -39,12 +39,12 @@ def take_coverage(det, measured) -> dict:
     ``measured_share`` (measured markers / direct-view dots); ``dot_px`` the median blob's diameter per view
     (None without areas); ``enough``: the share reaches :data:`MIN_MEASURED_SHARE`."""
     direct = det.counts(0)
-    shown = direct > 0
+    shown = direct > 0 if (direct > 0).any() else np.ones(len(direct), bool)
     n_measured = np.asarray(measured, bool).sum(axis=1)
-    share = float(np.median(n_measured[shown] / direct[shown])) if shown.any() else 0.0
-    return {"direct_dots": float(np.median(direct)),
-            "mirror_dots": [float(np.median(det.counts(v))) for v in range(1, len(det.xy))],
-            "measured": float(np.median(n_measured)), "measured_share": share,
+    share = float(np.median(n_measured[shown] / np.maximum(direct[shown], 1)))
+    return {"direct_dots": float(np.median(direct[shown])),
+            "mirror_dots": [float(np.median(det.counts(v)[shown])) for v in range(1, len(det.xy))],
+            "measured": float(np.median(n_measured[shown])), "measured_share": share,
             "dot_px": [det.typical_dot_px(v) for v in range(len(det.xy))],
             "enough": share >= MIN_MEASURED_SHARE}
 
