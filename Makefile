@@ -73,7 +73,8 @@ contact-sheet: $(STAMP)
 # yaw, +-6 deg roll), rendered at stop 36 and tuned on by nothing; cam450 (800x450, 150 dots of 3.2 mm, mirrors at 46
 # deg, +-12 deg yaw), rendered at stop 37 to check its change and tuned on by nothing; side600 (1024x600, 220 dots of
 # 2.4 mm, mirrors at 50 deg, +-14 deg yaw, +-6 deg roll), rendered at stop 38 and the clip its tracker change was found
-# on. About 105 minutes.
+# on; many1080 (1920x1080, 350 dots of 2 mm, mirrors at 46 deg, 60 frames), rendered at stop 40 and tuned on by
+# nothing. About 110 minutes.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -135,6 +136,9 @@ stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/side600 --size 1024 600 --focal 980 --distance 600 \
 		--mirror-deg 50 --markers 220 --marker-mm 2.4 --head-deg 10 14 6 --tempo 2.2 --frames 90 --samples 4 --seed 421 \
 		--no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/many1080 --size 1920 1080 --focal 1700 \
+		--distance 650 --mirror-deg 46 --markers 350 --marker-mm 2.0 --head-deg 8 12 5 --tempo 1.5 --frames 60 \
+		--samples 4 --seed 507 --no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
 # (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps; and hd, held out (1920x1080,
@@ -144,7 +148,8 @@ stress-clips: $(STAMP)
 # stop 38); deep720 (1280x720, a deep skin of sRGB 110,75,55, 200 dots of 2.6 mm, mirrors at 42 deg, +-12 deg yaw,
 # 90 frames; rendered at stop 38); ruddy540 (960x540, a ruddy skin, 200 dots of 2.8 mm, mirrors at 46 deg; stop 39);
 # small540 (960x540, medium skin, 240 dots of 2.2 mm 700 mm away -- 3.2 px across, 2.5-2.8 px in the mirrors: too
-# small for the detector under normal light, kept to check that the take says so; stop 40). About 85 minutes.
+# small for the detector under normal light, kept to check that the take says so; stop 40); four576 (1024x576, a
+# skin of sRGB 200,150,120, 200 dots of 2.7 mm: 4.0 px; held out at stop 40). About 90 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -168,4 +173,7 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin medium --out sample_scenes/normal/small540 \
 		--size 960 540 --focal 800 --markers 240 --marker-mm 2.2 --mirror-deg 48 --distance 700 --head-deg 8 14 6 \
 		--tempo 1.5 --frames 90 --seed 503 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 200,150,120 --out sample_scenes/normal/four576 \
+		--size 1024 576 --focal 950 --markers 200 --marker-mm 2.7 --mirror-deg 44 --distance 640 --head-deg 8 12 5 \
+		--tempo 1.6 --frames 90 --samples 4 --seed 505 --no-scan
 
