@@ -100,7 +100,7 @@ def _colours_and_light(args):
 
 
 def detect(args) -> int:
-    from ..core.capture.detect import run_detection, small_dot_warning
+    from ..core.capture.detect import dot_px_text, run_detection, small_dot_warning
     from ..core.capture.markers import ExtractionSettings
     from ..core.capture.rig import load_rig, view_boundary_warnings
     from ..core.geometry.camera import Camera
@@ -121,10 +121,9 @@ def detect(args) -> int:
     if not args.quiet:
         c = report["counts"]
         n = report["frames"]["processed"]
-        px = report["dot_px"]
-        sizes = ", ".join("-" if px[v] is None else f"{px[v]:.1f}" for v in ("direct", "mirror0", "mirror1"))
         print(f"{n} frames -> {args.output}: per frame {c['direct'] / n:.1f} direct, {c['mirror0'] / n:.1f} mirror0, "
-              f"{c['mirror1'] / n:.1f} mirror1, dots {sizes} px across ({report['frames_per_second']:.0f} frames/s)")
+              f"{c['mirror1'] / n:.1f} mirror1, dots {dot_px_text(report['dot_px'])} px across "
+              f"({report['frames_per_second']:.0f} frames/s)")
         for text in view_boundary_warnings(report["view_layout"]):
             print(f"  warning: {text}")
         small = small_dot_warning(light, report["dot_px"])

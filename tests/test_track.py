@@ -688,10 +688,10 @@ def test_coverage_of_a_take_counts_frames_with_dots_and_names_sizes_only_when_kn
     cov = take_coverage(det, measured)
     assert cov["measured_share"] == pytest.approx(0.2) and cov["direct_dots"] == 10 and cov["mirror_dots"] == [4, 3]
     assert cov["enough"] is False and cov["dot_px"][0] == pytest.approx(2 * np.sqrt(12 / np.pi))
-    text = coverage_warning(cov, det)
+    text = coverage_warning(cov)
     assert "measures 2 of the 10 dots" in text and "3.9 px across in the direct view, 3.0 and 3.0 px" in text
     measured[[0, 4], :int(np.ceil(10 * MIN_MEASURED_SHARE))] = True
-    assert coverage_warning(take_coverage(det, measured), det) is None
+    assert coverage_warning(take_coverage(det, measured)) is None
     bare = ClipDetections.of(frames([10, 10], False), camera)
     cov = take_coverage(bare, np.zeros((2, 12), bool))
-    assert cov["dot_px"] == [None, None, None] and "the dots measure" not in coverage_warning(cov, bare)
+    assert cov["dot_px"] == [None, None, None] and "the dots measure" not in coverage_warning(cov)

@@ -90,7 +90,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
 
     def run(self, context):
         from ...core.capture.markers import marker_extractor
-        from ...core.capture.detect import dot_diameter_px, dot_px_by_view, small_dot_warning
+        from ...core.capture.detect import dot_diameter_px, dot_px_by_view, dot_px_text, small_dot_warning
         from ...core.capture.rig import split_views_by_gaps
         from ...core.capture.video import open_source
         from ..common.clip import detections_to_clip_tracks, find_clip
@@ -117,9 +117,8 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         small = small_dot_warning(s.light, dot_px)
         if small:
             self.messages.warning(small)
-        sizes = ", ".join("-" if p is None else f"{p:.1f}" for p in dot_px.values())
         return (f"frame {n}: {count} markers ({per_view[0]} direct, {per_view[1]} mirror 0, {per_view[2]} mirror 1; "
-                f"dots {sizes} px across) shown as tracks of the clip's 'MirrorCap' object")
+                f"dots {dot_px_text(dot_px)} px across) shown as tracks of the clip's 'MirrorCap' object")
 
 
 class MIRRORCAP_OT_solve_mirrors(MirrorCapJobOperator):

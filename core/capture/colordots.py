@@ -161,9 +161,10 @@ class ColorDotExtractor:
     def candidates(self, frame_bgr: np.ndarray):
         """Step 2: ``(idx, contrast, value, bgr, background, hue)`` of the candidate dot pixels -- flat
         pixel indices, their chromaticity distance ``|c - c_bg|`` from the local background, their
-        brightest channel, their colour and the background's (float32 BGR), and their hue (radians). Only pixels whose colour differs from the background by more than
-        ``min_difference`` levels in some channel, averaged over 3x3 pixels, are looked at (a fast
-        first cut; a dot differs from skin by far more)."""
+        brightest channel, their colour and the background's (float32 BGR), and their hue (radians). Only
+        pixels whose colour differs from the background by more than ``min_difference`` levels in some
+        channel, averaged over 3x3 pixels, are looked at (a fast first cut; a dot differs from skin by far
+        more)."""
         cv2 = self._cv2
         s = self.settings
         bg = self._background(frame_bgr)

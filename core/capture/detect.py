@@ -249,6 +249,12 @@ def dot_px_by_view(area, view) -> dict:
     return {name: typical_dot_diameter_px(area[view == v]) or None for v, name in enumerate(VIEW_NAMES)}
 
 
+def dot_px_text(dot_px: dict) -> str:
+    """``"3.2, 2.8, 2.5"``: the typical dots of :func:`dot_px_by_view` in the order of :data:`.rig.VIEW_NAMES`
+    (``-`` where a view has none), as `detect` and Detect Markers print them."""
+    return ", ".join("-" if dot_px.get(v) is None else f"{dot_px[v]:.1f}" for v in VIEW_NAMES)
+
+
 def small_dot_warning(light: str, dot_px: dict) -> str | None:
     """The warning when, under ``light`` ``"normal"``, a mirror's typical dot (``dot_px``, :func:`dot_px_by_view`)
     measures under :data:`NORMAL_LIGHT_MIN_DOT_PX`; None otherwise."""

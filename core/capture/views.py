@@ -99,12 +99,12 @@ class ClipDetections:
     def __len__(self) -> int:
         return self.n_frames
 
-    def typical_dot_px(self, view: int) -> float | None:
-        """The diameter (pixels) of a disc of the median blob's area in ``view``; None where the detections carry
+    def typical_dot_px(self) -> list:
+        """Per view, the diameter (pixels) of a disc of the median blob's area; None where the detections carry
         no areas (the add-on's 2D tracks) or the view has no blob."""
-        if self.area is None or len(self.area[view]) == 0:
-            return None
-        return typical_dot_diameter_px(self.area[view])
+        if self.area is None:
+            return [None] * len(self.xy)
+        return [typical_dot_diameter_px(a) if len(a) else None for a in self.area]
 
     def typical_spacing(self, view: int, focal_px: float | None = None, frames: int = 20) -> float:
         """The median distance (pixels) from a blob of ``view`` to the nearest other blob of its frame,

@@ -21,11 +21,10 @@ MIN_MEASURED_SHARE = 0.3
 MEASURED_SHARE_SEEN = "53-99 %"
 
 
-def dot_sizes(det) -> str:
-    """``"the dots measure 3.2 px across in the direct view, 2.8 and 2.5 px in the mirrors"`` (the median
-    blob's, :meth:`..capture.views.ClipDetections.typical_dot_px`) of ``det``; ``""`` where the detections carry
-    no areas."""
-    px = [det.typical_dot_px(v) for v in range(len(det.xy))]
+def dot_sizes(px) -> str:
+    """``"the dots measure 3.2 px across in the direct view, 2.8 and 2.5 px in the mirrors"`` from each view's
+    typical dot ``px`` (the median blob's, :meth:`..capture.views.ClipDetections.typical_dot_px`); ``""`` where
+    the detections carry no areas."""
     if px[0] is None:
         return ""
     mirrors = " and ".join("-" if p is None else f"{p:.1f}" for p in px[1:])
@@ -45,15 +44,15 @@ def take_coverage(det, measured) -> dict:
     return {"direct_dots": float(np.median(direct[shown])),
             "mirror_dots": [float(np.median(det.counts(v)[shown])) for v in range(1, len(det.xy))],
             "measured": float(np.median(n_measured[shown])), "measured_share": share,
-            "dot_px": [det.typical_dot_px(v) for v in range(len(det.xy))],
+            "dot_px": det.typical_dot_px(),
             "enough": share >= MIN_MEASURED_SHARE}
 
 
-def coverage_warning(coverage: dict, det) -> str | None:
+def coverage_warning(coverage: dict) -> str | None:
     """The warning for a take whose :func:`take_coverage` is not ``enough``; None when it is."""
     if coverage["enough"]:
         return None
-    sizes = dot_sizes(det)
+    sizes = dot_sizes(coverage["dot_px"])
     mirrors = " and ".join(f"{n:.0f}" for n in coverage["mirror_dots"])
     return (f"in a typical frame the take measures {coverage['measured']:.0f} of the {coverage['direct_dots']:.0f} "
             f"dots its direct view shows ({100 * coverage['measured_share']:.0f} %, where the rigs measured give "

@@ -233,7 +233,7 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     if len(t_pairs[0]) < 5:
         at_once = " and ".join(f"{v:.0f}" for v in np.median(np.reshape(in_common, (-1, 2)), axis=0)) \
             if in_common else "none"
-        sizes = dot_sizes(det)
+        sizes = dot_sizes(det.typical_dot_px())
         raise DegenerateError(f"no marker is seen in both mirrors, and too few markers are tracked in each mirror "
                               f"at once to relate the two mirrors' scales through the head's motion ({markers[0]} and "
                               f"{markers[1]} over the first {F} frames, but {at_once} held from a frame to the one 10 "

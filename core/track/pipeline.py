@@ -204,7 +204,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     f"{', ...' if len(dropped_seeds) > 6 else ''}): their direct and mirror points are not one dot, or the "
                     "marker was lost; fix them in the clip (Take To Clip, rename the marker's tracks) and Re-solve")
     coverage = take_coverage(det, result.assigned_blob >= 0)
-    short = coverage_warning(coverage, det)
+    short = coverage_warning(coverage)
     if short:
         log.warning(short)
     if result.undecided:
