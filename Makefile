@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cat requirements.txt requirements-dev.txt pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench sample head character rig-clip stress-clips normal-clips extension contact-sheet clean venv
+.PHONY: demo test bench sample head character rig-clip stress-clips normal-clips compressed-clips extension contact-sheet clean venv
 
 venv: $(STAMP)
 
@@ -176,4 +176,12 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 200,150,120 --out sample_scenes/normal/four576 \
 		--size 1024 576 --focal 950 --markers 200 --marker-mm 2.7 --mirror-deg 44 --distance 640 --head-deg 8 12 5 \
 		--tempo 1.6 --frames 90 --samples 4 --seed 505 --no-scan
+
+# The normal-light clips above as a camera or a screen recorder would keep them (issue #18, stop 41): hd re-encoded
+# through Blender's FFmpeg at H.264 CRF 26 and 29 (4.1 and 2.0 Mbit/s at 1080p), light at CRF 26 (3.5 Mbit/s at
+# 720p). The rendered clips are kept at CRF 17. A minute.
+compressed-clips: $(STAMP)
+	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/hd sample_scenes/normal/hd_crf26 --quality LOW
+	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/hd sample_scenes/normal/hd_crf29 --quality VERYLOW
+	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/light sample_scenes/normal/light_crf26 --quality LOW
 

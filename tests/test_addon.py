@@ -87,7 +87,7 @@ def test_install_and_enable_like_a_user(built, tmp_path):
         "and i.get('threading_layer') != 'disabled'})\n"
         "with threadpoolctl.threadpool_limits(2, user_api='blas'):\n"
         "    outside = blas()\n"
-        "    with threads.limited_blas(): inside = blas()\n"
+        "    with threads.limited_threads(): inside = blas()\n"
         "print('RESULT ' + json.dumps({'install': sorted(r), 'enabled': addon is not None, 'ops': ops,\n"
         "    'panels': panels, 'marker_size': addon.preferences.empty_size_mm if addon else None,\n"
         "    'head': sorted(head), 'vertices': len(obj.data.vertices), 'keys': len(obj.data.shape_keys.key_blocks),\n"

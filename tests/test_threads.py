@@ -69,9 +69,12 @@ def test_the_blas_thread_count_is_the_users_to_set(monkeypatch, small_take):
             blas_threads()
 
 
-def test_detection_and_the_whole_track_command_run_on_one_blas_thread(monkeypatch):
+def test_detection_and_the_whole_track_command_run_on_one_blas_and_one_opencv_thread(monkeypatch):
     """``run_detection``, ``run_track`` and ``track_detections`` (the add-on's and the CLI's entry points)
-    enter their work with one BLAS thread: each is stopped at its first step and the count read there."""
+    enter their work with one BLAS thread and one OpenCV thread: each is stopped at its first step and the
+    counts read there; the caller's counts come back."""
+    import cv2
+
     import mirrorcap.core.capture.detect as detect
     import mirrorcap.core.track.pipeline as pipeline
 
@@ -82,20 +85,26 @@ def test_detection_and_the_whole_track_command_run_on_one_blas_thread(monkeypatc
         pass
 
     def first_step(*args, **kwargs):
-        seen.append(_blas_threads())
+        seen.append((_blas_threads(), cv2.getNumThreads()))
         raise Stop
 
     monkeypatch.setattr(detect, "_check_camera", first_step)          # run_detection's and run_track's first step
     monkeypatch.setattr(pipeline, "ClipDetections", type("C", (), {"of": staticmethod(first_step)}))
-    with threadpool_limits(limits=2, user_api="blas"):
-        if _blas_threads() != [2]:
-            pytest.skip("this machine's BLAS offers one thread: nothing to limit")
-        for call in (lambda: detect.run_detection(None, "out.csv"), lambda: pipeline.run_track(None, None, "t.c3d"),
-                     lambda: pipeline.track_detections([0, 1], [None, None], None, 30.0, "t.c3d")):
-            with pytest.raises(Stop):
-                call()
-        assert _blas_threads() == [2]
-    assert seen == [[1], [1], [1]]
+    opencv_before = cv2.getNumThreads()
+    cv2.setNumThreads(2)
+    try:
+        with threadpool_limits(limits=2, user_api="blas"):
+            if _blas_threads() != [2]:
+                pytest.skip("this machine's BLAS offers one thread: nothing to limit")
+            for call in (lambda: detect.run_detection(None, "out.csv"), lambda: pipeline.run_track(None, None, "t.c3d"),
+                         lambda: pipeline.track_detections([0, 1], [None, None], None, 30.0, "t.c3d")):
+                with pytest.raises(Stop):
+                    call()
+            assert _blas_threads() == [2]
+            assert cv2.getNumThreads() == 2
+    finally:
+        cv2.setNumThreads(opencv_before)
+    assert seen == [([1], 1), ([1], 1), ([1], 1)]
 
 
 def test_every_command_of_the_command_line_runs_on_one_blas_thread(monkeypatch, tmp_path):

@@ -18,7 +18,7 @@ window manager and a status line, Esc (or right-click) cancels -- the next
 ``progress`` call raises :class:`Cancelled` in the work, ``finish`` never runs, and the scene
 is as it was. From a script (``bpy.ops.mirrorcap.*()``, or whenever there is no window) the
 same three steps run in order on the calling thread. The work runs with one BLAS thread
-(:func:`core.common.threads.limited_blas`). ``cancel_after_steps`` (hidden) cancels
+(:func:`core.common.threads.limited_threads`). ``cancel_after_steps`` (hidden) cancels
 after that many progress calls exactly as Esc would: scripts and tests use it.
 """
 
@@ -34,7 +34,7 @@ from bpy.props import IntProperty
 
 from ...core.common.errors import MirrorCapError
 from ...core.common.log import MessageLog
-from ...core.common.threads import limited_blas
+from ...core.common.threads import limited_threads
 
 
 class Cancelled(Exception):
@@ -142,7 +142,7 @@ class MirrorCapJobOperator(MirrorCapOperator):
     def run(self, context):
         work = self.prepare(context)
         progress = Progress(self.cancel_after_steps)
-        with limited_blas():                # one BLAS thread (core/common/threads.py)
+        with limited_threads():                # one BLAS thread (core/common/threads.py)
             result = work(progress)
         return self.finish(context, result)
 
@@ -158,7 +158,7 @@ class MirrorCapJobOperator(MirrorCapOperator):
 
         def target():
             try:
-                with limited_blas():
+                with limited_threads():
                     self._outcome["result"] = work(self._progress)
             except BaseException as exc:  # handed to the main thread
                 self._outcome["error"] = exc

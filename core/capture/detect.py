@@ -28,7 +28,7 @@ import numpy as np
 from ..common.errors import InputError
 from ..common.files import default_file_mode, write_files_atomically
 from ..common.log import FrameProgress
-from ..common.threads import with_limited_blas
+from ..common.threads import with_limited_threads
 from ..geometry.camera import Camera
 from .detections import MAX_DOT_PX, typical_dot_diameter_px
 from .markers import ColorClasses, ExtractionSettings, marker_extractor
@@ -164,7 +164,7 @@ def _check_camera(camera: Camera | None, source: VideoSource):
                          f"{source.path} is {source.size[0]}x{source.size[1]}")
 
 
-@with_limited_blas
+@with_limited_threads
 def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = None,
                   settings: ExtractionSettings | None = None, layout: ViewLayout | None = None,
                   camera: Camera | None = None, start: int = 0, end: int | None = None, step: int = 1,
@@ -268,7 +268,7 @@ def small_dot_warning(light: str, dot_px: dict) -> str | None:
             "resolution, or UV light")
 
 
-@with_limited_blas
+@with_limited_threads
 def learn_color_classes(source: VideoSource, n_classes: int, *, names=None, start: int = 0, end: int | None = None,
                         step: int = 1, max_frames: int = 50, threshold: float = 60.0,
                         marker_diameter_px: float | None = None, samples_per_class: int = 8,

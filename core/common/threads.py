@@ -1,5 +1,5 @@
-"""One BLAS thread for MirrorCap's jobs (every command of the command line, every add-on job,
-and the core's detection and tracking entry points for callers of their own).
+"""One BLAS thread and one OpenCV thread for MirrorCap's jobs (every command of the command line,
+every add-on job, and the core's detection and tracking entry points for callers of their own).
 
 The core's array code makes tens of thousands of BLAS and LAPACK calls on tiny matrices (batched
 3x3 solves and inverses, (frames x 3) @ (3 x 3) products, per-frame least squares). OpenBLAS, which
@@ -10,9 +10,14 @@ frames 46 s against 2.8 s. On an idle machine one thread is as fast or faster (t
 clip tracks as fast with about a fifth less CPU; the ARKit solve 1.4 s against 1.8 s), except for
 the PCA bake's one large SVD (0.9 s against 0.5 s).
 
-``MIRRORCAP_BLAS_THREADS`` sets the count (a whole number; 0 leaves BLAS its own default). The limit
-is process-wide while a job runs (threadpoolctl) and is lifted when it returns. It reaches the BLAS
-libraries loaded when the job starts, so numpy's and scipy's are loaded first.
+OpenCV's own thread pool does the same to marker detection: its calls on one 1280x720 frame are too
+short to share, and on 2 cores the 600-frame bench clip's extraction took 1.79 s and 2.17 core-seconds
+with OpenCV's threads against 1.67 s and 1.67 core-seconds on one (stop 41, frames held in memory).
+
+``MIRRORCAP_BLAS_THREADS`` sets the count for both (a whole number; 0 leaves BLAS and OpenCV their own
+defaults). The limit is process-wide while a job runs (threadpoolctl; ``cv2.setNumThreads``) and is lifted
+when it returns. It reaches the BLAS libraries loaded when the job starts, so numpy's and scipy's are
+loaded first.
 """
 
 from __future__ import annotations
@@ -43,29 +48,36 @@ def blas_threads() -> int:
 
 
 @contextmanager
-def limited_blas():
-    """Run the enclosed work with :func:`blas_threads` BLAS threads, restoring the previous count after."""
+def limited_threads():
+    """Run the enclosed work with :func:`blas_threads` BLAS threads and as many OpenCV threads,
+    restoring the previous counts after."""
     n = blas_threads()
     if n == 0:
         yield
         return
     import importlib
 
+    import cv2
     from threadpoolctl import threadpool_limits
 
     for name in ("numpy", "scipy.linalg"):           # both BLAS libraries loaded, so that the limit reaches them
         importlib.import_module(name)
 
-    with threadpool_limits(limits=n, user_api="blas"):
-        yield
+    opencv_before = cv2.getNumThreads()
+    cv2.setNumThreads(n)
+    try:
+        with threadpool_limits(limits=n, user_api="blas"):
+            yield
+    finally:
+        cv2.setNumThreads(opencv_before)
 
 
-def with_limited_blas(job):
-    """Decorator: the job runs inside :func:`limited_blas`."""
+def with_limited_threads(job):
+    """Decorator: the job runs inside :func:`limited_threads`."""
 
     @functools.wraps(job)
     def run(*args, **kwargs):
-        with limited_blas():
+        with limited_threads():
             return job(*args, **kwargs)
 
     return run

@@ -12,12 +12,15 @@ face is put ``face_distance_mm`` (600) from the camera, which makes the units cl
 REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's distance was put in
 mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
-samples, markers -- or, with fewer than 3 markers in both mirrors, :func:`.mirrorscale.link_mirror_scales_by_motion`,
-which adds markers_per_mirror; ``source`` says which; null with MIRRORS.json); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
+samples, markers -- or, with fewer than 3 markers in both mirrors or their ratios spread over 0.5 %,
+:func:`.mirrorscale.link_mirror_scales_by_motion`, which adds markers_per_mirror and, in the second case,
+``shared_markers_link``: the doubted link it stands in for; ``source`` says which; null with MIRRORS.json;
+a warning, :func:`.mirrorscale.scale_link_warning`, when the shared markers' link had to stay though doubted); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
 the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px,
-relative_difference, ``consistent``: false -- with a warning -- when the median difference
-exceeds twice the expected sd; null when too few markers are seen in both); ``view_layout``
+relative_difference, ``scattered``, ``consistent``: false -- with a warning -- when the median difference
+exceeds twice the expected sd or the observed sd ten times it (``scattered``); null when too few markers are
+seen in both); ``view_layout``
 (:func:`..capture.rig.check_view_boundaries`: per boundary between views its ``x``, the views
 ``between`` it, ``dots_per_frame`` within a dot of it, ``crowding`` -- the detection density there
 over a view's --, the ``emptiest_x`` line nearby and its ``emptiest_crowding``, and ``crowded``, with a
@@ -50,7 +53,7 @@ from ..capture.video import VideoSource
 from ..common.log import MessageLog
 from ..common.errors import DegenerateError, InputError
 from ..common.files import write_files_atomically
-from ..common.threads import with_limited_blas
+from ..common.threads import with_limited_threads
 from ..geometry.camera import Camera
 from ..geometry.mirror import MirrorPlane
 from ..take.c3d import c3d_bytes
@@ -73,7 +76,7 @@ def collect_detections(stream) -> tuple[list, list]:
     return numbers, frames
 
 
-@with_limited_blas
+@with_limited_threads
 def run_track(source: VideoSource, camera: Camera, output, *, report=None, colors: ColorClasses | None = None,
               extraction: ExtractionSettings | None = None, layout: ViewLayout | None = None, mirrors=None,
               known_length=None, start: int = 0, end: int | None = None, step: int = 1,
@@ -116,7 +119,7 @@ def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
     return float(np.median(z))
 
 
-@with_limited_blas
+@with_limited_threads
 def track_detections(numbers, frames, camera: Camera, fps: float, output, *, report=None, mirrors=None,
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
                      timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
@@ -129,8 +132,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``.
     ``view_check``: :func:`..capture.rig.check_view_boundaries` of the detections' view layout
     (REPORT.json ``view_layout``; a warning when a boundary runs through dots)."""
-    from .mirrorscale import (MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
-                              link_mirror_scales_by_motion, mirror_agreement)
+    from .mirrorscale import (LINK_MAX_SPREAD, MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
+                              link_mirror_scales_by_motion, mirror_agreement, scale_link_warning)
     from .coverage import coverage_warning, take_coverage
     from .selfcal import self_calibrate_mirror
 
@@ -145,15 +148,19 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         cals = [self_calibrate_mirror(first, camera, k) for k in range(2)]
         normals = np.stack([c.plane.normal for c in cals])
         both = both_mirror_samples(det, camera, normals)
-        if both.enough_to_link:
-            ds, scale_link = link_mirror_scales(both, normals, [c.plane.d for c in cals])
-        else:  # the mirrors see only the sides of the face
+        own_ds = [c.plane.d for c in cals]
+        shared = link_mirror_scales(both, normals, own_ds) if both.enough_to_link else None
+        if shared is not None and shared[1]["relative_spread"] <= LINK_MAX_SPREAD:
+            ds, scale_link = shared
+        else:  # the mirrors see only the sides of the face, or the few markers in both disagree
             try:
-                ds, scale_link = link_mirror_scales_by_motion(det, camera, normals, [c.plane.d for c in cals])
+                ds, scale_link = link_mirror_scales_by_motion(det, camera, normals, own_ds)
+                if shared is not None:
+                    scale_link["shared_markers_link"] = shared[1]    # the link it stood in for
             except DegenerateError:  # a still head: the few markers in both mirrors are all there is
                 if len(both.p) < MIN_BOTH_MIRROR_SIGHTINGS:
                     raise
-                ds, scale_link = link_mirror_scales(both, normals, [c.plane.d for c in cals])
+                ds, scale_link = shared if shared is not None else link_mirror_scales(both, normals, own_ds)
         # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
         # levels are in mm, so put the face at its nominal distance: the take is then
         # "relative" units that are close to millimetres (a known length makes them exact).
@@ -190,14 +197,23 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         log.warning(sentence)
     agreement = mirror_agreement(both, np.stack([p.normal for p in planes]), np.array([p.d for p in planes]),
                                  camera.focal_px)
-    if agreement["consistent"] is False:
-        unit = "mm" if units == "mm" else "units"
+    link_doubt = scale_link_warning(scale_link)
+    if link_doubt:
+        log.warning(link_doubt)
+    unit = "mm" if units == "mm" else "units"
+    if agreement["consistent"] is False and not agreement["scattered"]:
         log.warning(f"the two mirrors disagree: a marker seen in both lands {agreement['median_difference']:+.2f} "
                     f"{unit} ({100 * agreement['relative_difference']:+.2f} %) further along its ray through mirror 0 "
                     f"than through mirror 1, where {agreement['expected_sd']:.2f} {unit} is expected "
                     f"({agreement['markers']} markers); the take's 3D points are off by up to that much -- "
                     + ("check MIRRORS.json, or track without it to self-calibrate" if mirror_source == "file"
                        else "the mirrors moved, or the clip shows too few markers in both mirrors"))
+    elif agreement["consistent"] is False:
+        log.warning(f"the markers seen in both mirrors do not agree: their depths through the two mirrors scatter by "
+                    f"{agreement['observed_sd']:.2f} {unit} (sd), where {agreement['expected_sd']:.2f} {unit} is "
+                    f"expected ({agreement['markers']} markers) -- their mirror images are poorly found or wrongly "
+                    "paired, and the take's points through the mirrors may be too; check the dots in the mirrors "
+                    "(under normal light, video compressed harder than H.264 at CRF 20 does this)")
     dropped_seeds = [] if seeds is None else [n for n in seeds.names if n not in result.labels]
     if dropped_seeds:
         log.warning(f"{len(dropped_seeds)} designation(s) of the seeds file did not hold ({', '.join(dropped_seeds[:6])}"

@@ -41,7 +41,7 @@ import warnings
 import numpy as np
 
 from ..common.errors import DegenerateError
-from ..common.threads import with_limited_blas
+from ..common.threads import with_limited_threads
 from ..geometry.camera import Camera
 from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import angles_zyx, robust_rigid_fit, rotation_zyx
@@ -205,7 +205,7 @@ def _initial_markers(det: ClipDetections, camera, normals, ds, settings, seeds=N
     return (blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)), undecided, names
 
 
-@with_limited_blas
+@with_limited_threads
 def track(frames, camera: Camera, planes, settings: TrackSettings | None = None, progress=None,
           rigid=None, seeds=None) -> TrackResult:
     """Track the markers of ``frames`` (objects with ``direct``, ``direct_color``,
