@@ -11,8 +11,9 @@ clip tracks as fast with about a fifth less CPU; the ARKit solve 1.4 s against 1
 the PCA bake's one large SVD (0.9 s against 0.5 s).
 
 OpenCV's own thread pool does the same to marker detection: its calls on one 1280x720 frame are too
-short to share, and on 2 cores the 600-frame bench clip's extraction took 1.79 s and 2.17 core-seconds
-with OpenCV's threads against 1.67 s and 1.67 core-seconds on one (stop 41, frames held in memory).
+short to share, and on 2 cores the 600-frame bench clip's extraction took 1.73-1.83 s and 2.08-2.22
+core-seconds with OpenCV's threads against 1.67-1.74 s and as many core-seconds on one (stop 41, frames held
+in memory, three runs each).
 
 ``MIRRORCAP_BLAS_THREADS`` sets the count for both (a whole number; 0 leaves BLAS and OpenCV their own
 defaults). The limit is process-wide while a job runs (threadpoolctl; ``cv2.setNumThreads``) and is lifted
