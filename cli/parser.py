@@ -337,7 +337,7 @@ def main(argv=None) -> int:
     if getattr(args, "threshold", 1.0) <= 0:
         parser.error("--threshold must be positive")
     try:
-        with limited_threads():        # one BLAS thread (core/common/threads.py): tiny solves stall on more
+        with limited_threads():     # one BLAS and one OpenCV thread (core/common/threads.py): tiny solves stall on more
             return args.func(args)
     except MirrorCapError as exc:
         print(f"mirrorcap: error: {exc}", file=sys.stderr)

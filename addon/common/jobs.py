@@ -17,8 +17,8 @@ Invoked from the UI, the job runs modally: the work on a thread, a progress bar 
 window manager and a status line, Esc (or right-click) cancels -- the next
 ``progress`` call raises :class:`Cancelled` in the work, ``finish`` never runs, and the scene
 is as it was. From a script (``bpy.ops.mirrorcap.*()``, or whenever there is no window) the
-same three steps run in order on the calling thread. The work runs with one BLAS thread
-(:func:`core.common.threads.limited_threads`). ``cancel_after_steps`` (hidden) cancels
+same three steps run in order on the calling thread. The work runs with one BLAS thread and one
+OpenCV thread (:func:`core.common.threads.limited_threads`). ``cancel_after_steps`` (hidden) cancels
 after that many progress calls exactly as Esc would: scripts and tests use it.
 """
 
@@ -142,7 +142,7 @@ class MirrorCapJobOperator(MirrorCapOperator):
     def run(self, context):
         work = self.prepare(context)
         progress = Progress(self.cancel_after_steps)
-        with limited_threads():                # one BLAS thread (core/common/threads.py)
+        with limited_threads():             # one BLAS and one OpenCV thread (core/common/threads.py)
             result = work(progress)
         return self.finish(context, result)
 

@@ -43,6 +43,8 @@ SCATTER_LIMIT = 10.0     # ... or when the markers scatter between the mirrors b
                          # CRF 23-26 46-66 (its three markers in both mirrors mostly wrong pairs, 3 mm RMS)
 LINK_MAX_SPREAD = 0.005  # the shared markers' link is doubted when their ratios spread by more than 0.5 %: 0.01-0.27 %
                          # on the 40 clips, 0.9-2.4 % on that clip re-encoded (its ratio 1.4-2.1 % off)
+#: what the warnings below advise under normal light (README, "The rig: what it needs": video quality)
+VIDEO_QUALITY_HINT = "under normal light, record at H.264 CRF 20 or better: harder compression washes out the dots"
 MIN_BOTH_MIRROR_SIGHTINGS = 10  # fewer sightings of markers in both mirrors: the scales are linked by head motion
 MIN_BOTH_MIRROR_MARKERS = 3     # ... and fewer markers: one wrongly paired marker would set the ratio (mirror35,
                                 # one marker's 15 sightings: 1.22 where the truth is 1.00), so head motion links them
@@ -197,8 +199,7 @@ def scale_link_warning(link: dict | None) -> str | None:
            f"(up to {100 * LINK_MAX_SPREAD:.1f} % holds)")
     return (f"the two mirrors' scales rest on {why}, and the head's motion could not relate them either: depths "
             "through one mirror may be off by a few per cent against the other's. Give MIRRORS.json from "
-            "`mirrorcap mirrors`, or record at a higher video quality (under normal light, H.264 at CRF 20 or "
-            "better)")
+            f"`mirrorcap mirrors`, or a better video ({VIDEO_QUALITY_HINT})")
 
 
 def _one_mirror_points(det: ClipDetections, camera: Camera, normals, ds, band_px: float = 1.0):

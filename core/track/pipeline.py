@@ -15,7 +15,8 @@ mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spr
 samples, markers -- or, with fewer than 3 markers in both mirrors or their ratios spread over 0.5 %,
 :func:`.mirrorscale.link_mirror_scales_by_motion`, which adds markers_per_mirror and, in the second case,
 ``shared_markers_link``: the doubted link it stands in for; ``source`` says which; null with MIRRORS.json;
-a warning, :func:`.mirrorscale.scale_link_warning`, when the shared markers' link had to stay though doubted); ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
+a warning, :func:`.mirrorscale.scale_link_warning`, when the shared markers' link had to stay though doubted);
+``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
 the two mirrors in take units, the expected sd, the observed sd (1.4826 MAD), noise_px,
 relative_difference, ``scattered``, ``consistent``: false -- with a warning -- when the median difference
@@ -132,8 +133,9 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``.
     ``view_check``: :func:`..capture.rig.check_view_boundaries` of the detections' view layout
     (REPORT.json ``view_layout``; a warning when a boundary runs through dots)."""
-    from .mirrorscale import (LINK_MAX_SPREAD, MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
-                              link_mirror_scales_by_motion, mirror_agreement, scale_link_warning)
+    from .mirrorscale import (LINK_MAX_SPREAD, MIN_BOTH_MIRROR_SIGHTINGS, VIDEO_QUALITY_HINT, both_mirror_samples,
+                              link_mirror_scales, link_mirror_scales_by_motion, mirror_agreement,
+                              scale_link_warning)
     from .coverage import coverage_warning, take_coverage
     from .selfcal import self_calibrate_mirror
 
@@ -213,7 +215,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     f"{agreement['observed_sd']:.2f} {unit} (sd), where {agreement['expected_sd']:.2f} {unit} is "
                     f"expected ({agreement['markers']} markers) -- their mirror images are poorly found or wrongly "
                     "paired, and the take's points through the mirrors may be too; check the dots in the mirrors "
-                    "(under normal light, video compressed harder than H.264 at CRF 20 does this)")
+                    f"({VIDEO_QUALITY_HINT})")
     dropped_seeds = [] if seeds is None else [n for n in seeds.names if n not in result.labels]
     if dropped_seeds:
         log.warning(f"{len(dropped_seeds)} designation(s) of the seeds file did not hold ({', '.join(dropped_seeds[:6])}"
