@@ -32,6 +32,17 @@ def _run(args, capsys):
     return code, out.out, out.err
 
 
+def _tracked(name, tmp_path, capsys) -> str:
+    """``mirrorcap track`` on ``sample_scenes/normal/<name>`` as a user runs it (its rig file's views, normal light),
+    the take and its report written to ``tmp_path / <name>.c3d`` and ``.json``; returns what it printed."""
+    clip = ROOT / "sample_scenes" / "normal" / name
+    code, out, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
+                           "--rig", clip / "rig.json", "-o", tmp_path / f"{name}.c3d", "--report",
+                           tmp_path / f"{name}.json"], capsys)
+    assert code == 0, err
+    return out + err
+
+
 def _projections(truth, camera, f):
     P = truth["points"][f]
     return [camera.project(P)] + [camera.project(reflect_points(P, truth["mirror_normals"][k], truth["mirror_d"][k]))
@@ -431,12 +442,9 @@ def test_a_video_compressed_too_hard_links_the_mirrors_by_head_motion_and_says_s
 
     runs = {}
     for name in ("hd_crf26", "hd_crf29"):
+        text = _tracked(name, tmp_path, capsys)
         clip = ROOT / "sample_scenes" / "normal" / name
-        code, out, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
-                               "--rig", clip / "rig.json", "-o", tmp_path / f"{name}.c3d", "--report",
-                               tmp_path / f"{name}.json"], capsys)
-        assert code == 0, err
-        runs[name] = (*scored_take(clip, tmp_path / f"{name}.c3d", tmp_path / f"{name}.json"), out + err)
+        runs[name] = (*scored_take(clip, tmp_path / f"{name}.c3d", tmp_path / f"{name}.json"), text)
     s, report, ratio_error, text = runs["hd_crf26"]
     link = report["mirror_scale_link"]
     print(f"hd_crf26: link {link['source']} {link['ratio']:.4f} (ratio error {100 * ratio_error:+.2f} %), RMS "
@@ -461,12 +469,8 @@ def test_a_take_that_measures_few_of_the_dots_it_shows_says_so(tmp_path, capsys)
     dots' sizes; the light clip (99 %) has no such line."""
     runs = {}
     for name in ("small540", "light"):
-        clip = ROOT / "sample_scenes" / "normal" / name
-        code, out, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
-                               "--rig", clip / "rig.json", "-o", tmp_path / f"{name}.c3d", "--report",
-                               tmp_path / f"{name}.json"], capsys)
-        assert code == 0, err
-        runs[name] = (json.loads((tmp_path / f"{name}.json").read_text()), out + err)
+        text = _tracked(name, tmp_path, capsys)
+        runs[name] = (json.loads((tmp_path / f"{name}.json").read_text()), text)
     report, text = runs["small540"]
     coverage = report["coverage"]
     assert coverage["enough"] is False and coverage["measured_share"] < 0.05 and coverage["direct_dots"] > 100
