@@ -222,6 +222,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
             "settings": asdict(settings),
             "counts": {**{v: int(c) for v, c in zip(VIEW_NAMES, counts)}, "outside_views": int(counts[-1])},
             "dot_px": dot_px_by_view(np.concatenate(areas), np.concatenate(area_views)),
+            "video": source.compression(),
             "timings_s": {"total": elapsed, "extract": t_extract, "write": t_write,
                           "decode_and_other": elapsed - t_extract - t_write},
             "frames_per_second": done / elapsed if elapsed > 0 else None,
@@ -241,6 +242,27 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
 #: halved colour resolution blends them into the skin), 3.6 px and more kept them (ruddy540 and the other six
 #: normal-light clips)
 NORMAL_LIGHT_MIN_DOT_PX = 3.3
+
+
+#: what the warnings on a take's video advise (README, "The rig: what it needs": video quality)
+VIDEO_QUALITY_HINT = "under normal light, record at H.264 CRF 20 or better: harder compression washes out the dots"
+#: under normal light a video holding fewer bits per pixel of a frame than this is warned about
+#: (:func:`compression_warning`): the normal-light clips re-encoded to 0.07-0.13 (H.264 CRF 23-26) lost mirror dots
+#: (92.3-96.5 % of the seen marker-frames, 0.50-0.56 mm RMS) where the same clips at 0.19-0.47 (CRF 17-23) tracked
+#: 97.3-99.6 % at 0.21-0.34 mm; the ten normal-light clips rendered at CRF 17 hold 0.21-0.47
+NORMAL_LIGHT_MIN_BITS_PER_PIXEL = 0.15
+
+
+def compression_warning(light: str, compression: dict | None) -> str | None:
+    """The warning when, under ``light`` ``"normal"``, the video (``compression``,
+    :meth:`.video.VideoSource.compression`) holds fewer than :data:`NORMAL_LIGHT_MIN_BITS_PER_PIXEL` bits per
+    pixel of a frame; None otherwise (and for UV light, whose glowing dots survived 0.01)."""
+    if light != "normal" or not compression or compression["bits_per_pixel"] >= NORMAL_LIGHT_MIN_BITS_PER_PIXEL:
+        return None
+    return (f"the video holds {compression['bits_per_pixel']:.2f} bits per pixel of a frame "
+            f"({compression['mbit_per_s']:.1f} Mbit/s): under normal light, videos compressed this hard lost dots in "
+            "the mirrors (0.07-0.13 bits: 92-97 % of the seen marker-frames and twice the error, where 0.19 and more "
+            f"kept 97-99.6 %) -- {VIDEO_QUALITY_HINT}")
 
 
 def dot_px_by_view(area, view) -> dict:

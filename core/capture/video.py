@@ -79,6 +79,16 @@ class VideoSource:
     size: tuple[int, int]  # (width, height)
     files: list | None = None
 
+    def compression(self) -> dict | None:
+        """How hard a video file is compressed: ``{"mbit_per_s", "bits_per_pixel"}`` -- the file's bits per
+        second, and per pixel of one frame (the file over its frames' pixels: a container's other streams
+        and headers count too). None for an image sequence, or a video of unknown length or rate."""
+        if self.kind != "video" or self.frame_count <= 0 or not self.fps > 0:
+            return None
+        bits = 8.0 * os.path.getsize(self.path)
+        return {"mbit_per_s": bits * self.fps / self.frame_count / 1e6,
+                "bits_per_pixel": bits / (self.frame_count * self.size[0] * self.size[1])}
+
     def frames(self, start: int = 0, end: int | None = None, step: int = 1, prefetch: int = 0):
         """Yield ``(frame_number, bgr_image)`` for ``start <= n < end`` every ``step``.
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..capture.detect import VIDEO_QUALITY_HINT
 from ..capture.views import ClipDetections
 from ..common.errors import DegenerateError
 from ..geometry.camera import Camera
@@ -43,8 +44,6 @@ SCATTER_LIMIT = 10.0     # ... or when the markers scatter between the mirrors b
                          # CRF 23-26 46-66 (its three markers in both mirrors mostly wrong pairs, 3 mm RMS)
 LINK_MAX_SPREAD = 0.005  # the shared markers' link is doubted when their ratios spread by more than 0.5 %: 0.01-0.27 %
                          # on the 40 clips, 0.9-2.4 % on that clip re-encoded (its ratio 1.4-2.1 % off)
-#: what the warnings below advise under normal light (README, "The rig: what it needs": video quality)
-VIDEO_QUALITY_HINT = "under normal light, record at H.264 CRF 20 or better: harder compression washes out the dots"
 MIN_BOTH_MIRROR_SIGHTINGS = 10  # fewer sightings of markers in both mirrors: the scales are linked by head motion
 MIN_BOTH_MIRROR_MARKERS = 3     # ... and fewer markers: one wrongly paired marker would set the ratio (mirror35,
                                 # one marker's 15 sightings: 1.22 where the truth is 1.00), so head motion links them

@@ -37,7 +37,9 @@ frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
 ``conflicts``, ``conjectured``, ``withheld``: conjectures left as gaps, expected off by more than
 the limit; ``doubted`` and ``repaired``: single-mirror measurements made gaps or re-paired,
 :func:`.gapfill.doubt_outlying_measurements`;
-the tracker's other stages add theirs); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
+the tracker's other stages add theirs); ``video`` (:meth:`..capture.video.VideoSource.compression`: mbit_per_s,
+bits_per_pixel; null for image sequences and detections given; under normal light a warning below 0.15 bits per
+pixel, :func:`..capture.detect.compression_warning`); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
 tracker stage, ``tracking_frames_per_s``).
 """
 
@@ -89,11 +91,16 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
     ``rigid`` names the markers that carry the head pose, as :func:`..capture.rig.rigid_selection` gives
     them (``rigid_source`` says where they came from, for the report)."""
-    from ..capture.detect import DetectionStream, _check_camera
+    from ..capture.detect import DetectionStream, _check_camera, compression_warning
 
     _check_camera(camera, source)
-    t0 = time.perf_counter()
     extraction = extraction or ExtractionSettings()
+    video = source.compression()
+    log = log if log is not None else MessageLog()
+    hard = compression_warning(extraction.light, video)
+    if hard:
+        log.warning(hard)
+    t0 = time.perf_counter()
     stream = DetectionStream(source, colors or ColorClasses.default(extraction.light), extraction, layout,
                              start, end, step, progress)
     numbers, frames = collect_detections(stream)
@@ -105,7 +112,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
-                            rigid_source=rigid_source, log=log, seeds=seeds, view_check=views)
+                            rigid_source=rigid_source, log=log, seeds=seeds, view_check=views, video=video)
 
 
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
@@ -125,17 +132,18 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
                      timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
                      rigid_source: str = "rig file", log: MessageLog | None = None, seeds=None,
-                     view_check: dict | None = None) -> dict:
+                     view_check: dict | None = None, video: dict | None = None) -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
     ``rigid``: the markers that carry the head pose, as :func:`core.track.tracker.track` takes them.
     Without MIRRORS.json the scale is set by putting the face ``face_distance_mm`` away.
     Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``.
     ``view_check``: :func:`..capture.rig.check_view_boundaries` of the detections' view layout
-    (REPORT.json ``view_layout``; a warning when a boundary runs through dots)."""
-    from .mirrorscale import (LINK_MAX_SPREAD, MIN_BOTH_MIRROR_SIGHTINGS, VIDEO_QUALITY_HINT, both_mirror_samples,
-                              link_mirror_scales, link_mirror_scales_by_motion, mirror_agreement,
-                              scale_link_warning)
+    (REPORT.json ``view_layout``; a warning when a boundary runs through dots); ``video``: the source's
+    :meth:`..capture.video.VideoSource.compression` (REPORT.json ``video``)."""
+    from ..capture.detect import VIDEO_QUALITY_HINT
+    from .mirrorscale import (LINK_MAX_SPREAD, MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
+                              link_mirror_scales_by_motion, mirror_agreement, scale_link_warning)
     from .coverage import coverage_warning, take_coverage
     from .selfcal import self_calibrate_mirror
 
@@ -235,6 +243,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         "mirror_scale_link": scale_link,
         "mirror_agreement": agreement,
         "coverage": coverage,
+        "video": video,
         "view_layout": view_check,
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
