@@ -100,7 +100,7 @@ def _colours_and_light(args):
 
 
 def detect(args) -> int:
-    from ..core.capture.detect import compression_warning, dot_px_text, run_detection, small_dot_warning
+    from ..core.capture.detect import dot_px_text, run_detection, small_dot_warning
     from ..core.capture.markers import ExtractionSettings
     from ..core.capture.rig import load_rig, view_boundary_warnings
     from ..core.geometry.camera import Camera
@@ -126,9 +126,9 @@ def detect(args) -> int:
               f"({report['frames_per_second']:.0f} frames/s)")
         for text in view_boundary_warnings(report["view_layout"]):
             print(f"  warning: {text}")
-        for text in (small_dot_warning(light, report["dot_px"]), compression_warning(light, report["video"])):
-            if text:
-                print(f"  warning: {text}")
+        small = small_dot_warning(light, report["dot_px"])
+        if small:
+            print(f"  warning: {small}")
     return 0
 
 

@@ -397,7 +397,6 @@ def test_held_out_normal_light_clips(tmp_path, capsys, name, rms_mm, reported, r
     assert abs(ratio_error) < ratio
     assert report["mirror_agreement"]["scattered"] is False      # stop 41's checks say nothing on a sound take
     assert not any("mirrors" in w and ("scales rest on" in w or "do not agree" in w) for w in report["warnings"])
-    assert report["video"]["bits_per_pixel"] > 0.15 and not any("bits per pixel" in w for w in report["warnings"])
     assert s["identity_switches"] == 0 and s["markers_tracked"] >= 100
     assert s["rms_mm"] < rms_mm
     assert s["seen_reported_fraction"] >= reported
@@ -446,9 +445,8 @@ def test_a_video_compressed_too_hard_links_the_mirrors_by_head_motion_and_says_s
         text = _tracked(name, tmp_path, capsys)
         clip = ROOT / "sample_scenes" / "normal" / name
         runs[name] = (*scored_take(clip, tmp_path / f"{name}.c3d", tmp_path / f"{name}.json"), text)
-    for name, (_, report, _, text) in runs.items():     # the video's compression, said first
-        assert report["video"]["bits_per_pixel"] < 0.1 and report["warnings"][0].startswith("the video holds 0.0")
-        assert "warning: the video holds" in text
+    for name, (_, report, _, text) in runs.items():     # the video's compression, recorded
+        assert report["video"]["bits_per_pixel"] < 0.07 and report["video"]["mbit_per_s"] < 4.2
     s, report, ratio_error, text = runs["hd_crf26"]
     link = report["mirror_scale_link"]
     print(f"hd_crf26: link {link['source']} {link['ratio']:.4f} (ratio error {100 * ratio_error:+.2f} %), RMS "
@@ -463,25 +461,21 @@ def test_a_video_compressed_too_hard_links_the_mirrors_by_head_motion_and_says_s
     assert len(warned) == 1 and "warning: the two mirrors' scales rest on" in text
 
 
-def test_detect_gives_the_videos_compression_and_warns_under_normal_light(tmp_path, capsys):
+def test_detect_records_the_videos_compression(tmp_path, capsys):
     """#18, stop 41: `mirrorcap detect` records the video's bits per second and per pixel of a frame in DETECTIONS.json
-    and, under normal light, warns below 0.15 bits per pixel (capture.detect.NORMAL_LIGHT_MIN_BITS_PER_PIXEL): hd at
-    H.264 CRF 26 holds 0.067 and lost mirror dots; hd as rendered (CRF 17) holds 0.27; a UV clip is never warned."""
-    from mirrorcap.core.capture.detect import compression_warning
-
-    printed, reports = {}, {}
+    (``video``; REPORT.json has the same): hd at H.264 CRF 26 (`make compressed-clips`) holds 0.067 bits per pixel of
+    a frame, 4.15 Mbit/s; hd as rendered (CRF 17) 0.27. No warning rests on it: the normal-light clips re-encoded at
+    CRF 20 lost dots at 0.17-0.27 bits (four576 94.0 -> 73.0 %) while the dark clip at CRF 23 kept them at 0.11."""
+    reports = {}
     for name in ("hd_crf26", "hd"):
         clip = ROOT / "sample_scenes" / "normal" / name
-        code, out, err = _run(["detect", clip / "clip.mp4", "--light", "normal", "--rig", clip / "rig.json",
-                               "--frames", "0:5", "-o", tmp_path / f"{name}.csv"], capsys)
+        code, _, err = _run(["detect", clip / "clip.mp4", "--light", "normal", "--rig", clip / "rig.json",
+                             "--frames", "0:5", "-q", "-o", tmp_path / f"{name}.csv"], capsys)
         assert code == 0, err
-        printed[name] = out + err
         reports[name] = json.loads((tmp_path / f"{name}.json").read_text())
     assert abs(reports["hd_crf26"]["video"]["bits_per_pixel"] - 0.0667) < 0.001
     assert abs(reports["hd_crf26"]["video"]["mbit_per_s"] - 4.15) < 0.01
-    assert "warning: the video holds 0.07 bits per pixel of a frame (4.2 Mbit/s)" in printed["hd_crf26"]
-    assert reports["hd"]["video"]["bits_per_pixel"] > 0.25 and "bits per pixel" not in printed["hd"]
-    assert compression_warning("uv", reports["hd_crf26"]["video"]) is None
+    assert abs(reports["hd"]["video"]["bits_per_pixel"] - 0.268) < 0.002
 
 
 def test_a_take_that_measures_few_of_the_dots_it_shows_says_so(tmp_path, capsys):

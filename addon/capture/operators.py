@@ -90,8 +90,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
 
     def run(self, context):
         from ...core.capture.markers import marker_extractor
-        from ...core.capture.detect import (compression_warning, dot_diameter_px, dot_px_by_view, dot_px_text,
-                                            small_dot_warning)
+        from ...core.capture.detect import dot_diameter_px, dot_px_by_view, dot_px_text, small_dot_warning
         from ...core.capture.rig import split_views_by_gaps
         from ...core.capture.video import open_source
         from ..common.clip import detections_to_clip_tracks, find_clip
@@ -115,9 +114,9 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         count = detections_to_clip_tracks(clip, n, det.x, det.y, det.color, view, source.size)
         per_view = np.bincount(view[view >= 0], minlength=3)
         dot_px = dot_px_by_view(det.area, view)
-        for text in (small_dot_warning(s.light, dot_px), compression_warning(s.light, source.compression())):
-            if text:
-                self.messages.warning(text)
+        small = small_dot_warning(s.light, dot_px)
+        if small:
+            self.messages.warning(small)
         return (f"frame {n}: {count} markers ({per_view[0]} direct, {per_view[1]} mirror 0, {per_view[2]} mirror 1; "
                 f"dots {dot_px_text(dot_px)} px across) shown as tracks of the clip's 'MirrorCap' object")
 

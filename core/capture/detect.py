@@ -244,25 +244,9 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
 NORMAL_LIGHT_MIN_DOT_PX = 3.3
 
 
-#: what the warnings on a take's video advise (README, "The rig: what it needs": video quality)
-VIDEO_QUALITY_HINT = "under normal light, record at H.264 CRF 20 or better: harder compression washes out the dots"
-#: under normal light a video holding fewer bits per pixel of a frame than this is warned about
-#: (:func:`compression_warning`): the normal-light clips re-encoded to 0.07-0.13 (H.264 CRF 23-26) lost mirror dots
-#: (92.3-96.5 % of the seen marker-frames, 0.50-0.56 mm RMS) where the same clips at 0.19-0.47 (CRF 17-23) tracked
-#: 97.3-99.6 % at 0.21-0.34 mm; the ten normal-light clips rendered at CRF 17 hold 0.21-0.47
-NORMAL_LIGHT_MIN_BITS_PER_PIXEL = 0.15
-
-
-def compression_warning(light: str, compression: dict | None) -> str | None:
-    """The warning when, under ``light`` ``"normal"``, the video (``compression``,
-    :meth:`.video.VideoSource.compression`) holds fewer than :data:`NORMAL_LIGHT_MIN_BITS_PER_PIXEL` bits per
-    pixel of a frame; None otherwise (and for UV light, whose glowing dots survived 0.01)."""
-    if light != "normal" or not compression or compression["bits_per_pixel"] >= NORMAL_LIGHT_MIN_BITS_PER_PIXEL:
-        return None
-    return (f"the video holds {compression['bits_per_pixel']:.2f} bits per pixel of a frame "
-            f"({compression['mbit_per_s']:.1f} Mbit/s): under normal light, videos compressed this hard lost dots in "
-            "the mirrors (0.07-0.13 bits: 92-97 % of the seen marker-frames and twice the error, where 0.19 and more "
-            f"kept 97-99.6 %) -- {VIDEO_QUALITY_HINT}")
+#: what the warnings on a take's mirrors advise (README, "The rig: what it needs": video quality)
+VIDEO_QUALITY_HINT = ("under normal light, keep the video near-lossless (H.264 CRF 17 or better): compression washes "
+                      "out small dots")
 
 
 def dot_px_by_view(area, view) -> dict:

@@ -38,8 +38,7 @@ frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
 the limit; ``doubted`` and ``repaired``: single-mirror measurements made gaps or re-paired,
 :func:`.gapfill.doubt_outlying_measurements`;
 the tracker's other stages add theirs); ``video`` (:meth:`..capture.video.VideoSource.compression`: mbit_per_s,
-bits_per_pixel; null for image sequences and detections given; under normal light a warning below 0.15 bits per
-pixel, :func:`..capture.detect.compression_warning`); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
+bits_per_pixel; null for image sequences and detections given); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
 tracker stage, ``tracking_frames_per_s``).
 """
 
@@ -91,15 +90,10 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
     ``rigid`` names the markers that carry the head pose, as :func:`..capture.rig.rigid_selection` gives
     them (``rigid_source`` says where they came from, for the report)."""
-    from ..capture.detect import DetectionStream, _check_camera, compression_warning
+    from ..capture.detect import DetectionStream, _check_camera
 
     _check_camera(camera, source)
     extraction = extraction or ExtractionSettings()
-    video = source.compression()
-    log = log if log is not None else MessageLog()
-    hard = compression_warning(extraction.light, video)
-    if hard:
-        log.warning(hard)
     t0 = time.perf_counter()
     stream = DetectionStream(source, colors or ColorClasses.default(extraction.light), extraction, layout,
                              start, end, step, progress)
@@ -112,7 +106,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
-                            rigid_source=rigid_source, log=log, seeds=seeds, view_check=views, video=video)
+                            rigid_source=rigid_source, log=log, seeds=seeds, view_check=views, video=source.compression())
 
 
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
