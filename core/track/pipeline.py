@@ -38,7 +38,8 @@ frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
 the limit; ``doubted`` and ``repaired``: single-mirror measurements made gaps or re-paired,
 :func:`.gapfill.doubt_outlying_measurements`;
 the tracker's other stages add theirs); ``video`` (:meth:`..capture.video.VideoSource.compression`: mbit_per_s,
-bits_per_pixel; null for image sequences and detections given); ``timings_s`` (``detect``, ``track``, ``track_stages``: seconds per
+bits_per_pixel; null for image sequences and detections given); ``timings_s`` (``detect``, ``track``,
+``track_stages``: seconds per
 tracker stage, ``tracking_frames_per_s``).
 """
 
@@ -106,7 +107,8 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
-                            rigid_source=rigid_source, log=log, seeds=seeds, view_check=views, video=source.compression())
+                            rigid_source=rigid_source, log=log, seeds=seeds, view_check=views,
+                            video=source.compression())
 
 
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
