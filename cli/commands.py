@@ -100,7 +100,7 @@ def _colours_and_light(args):
 
 
 def detect(args) -> int:
-    from ..core.capture.detect import dot_px_text, run_detection, small_dot_warning
+    from ..core.capture.detect import between_classes_warning, dot_px_text, run_detection, small_dot_warning
     from ..core.capture.markers import ExtractionSettings
     from ..core.capture.rig import load_rig, view_boundary_warnings
     from ..core.geometry.camera import Camera
@@ -126,9 +126,10 @@ def detect(args) -> int:
               f"({report['frames_per_second']:.0f} frames/s)")
         for text in view_boundary_warnings(report["view_layout"]):
             print(f"  warning: {text}")
-        small = small_dot_warning(light, report["dot_px"])
-        if small:
-            print(f"  warning: {small}")
+        for text in (small_dot_warning(light, report["dot_px"]),
+                     between_classes_warning(light, report["between_classes"])):
+            if text:
+                print(f"  warning: {text}")
     return 0
 
 

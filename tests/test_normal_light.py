@@ -478,6 +478,32 @@ def test_detect_records_the_videos_compression(tmp_path, capsys):
     assert abs(reports["hd"]["video"]["bits_per_pixel"] - 0.268) < 0.002
 
 
+def test_a_take_whose_dots_colours_are_washed_out_says_so(tmp_path, capsys):
+    """#18, stop 41: compression washes a small dot's colour out until its hue falls between the colour classes and
+    the detector drops it. light_crf26 (the light clip at H.264 CRF 26) tracks 92.3 % of its seen marker-frames where
+    the light clip tracks 99.6 %, and nothing said so. Blobs that pass every test but the hue's, far from the skin's
+    hue, are now counted (``between_classes``): 3.6 % as many as the dots found on light_crf26, 0.1 % on light (the
+    rendered normal-light clips: 0.0-1.1 %); over 2 % is a warning from `track` and `detect`. Held out (rendered
+    after the limit was set, not in the repository): rose720 (4.1 px mirror dots) 0.3 % as rendered, 3.3 / 7.9 /
+    13.4 % at CRF 20 / 23 / 26, where its take lost 11 / 42 / 80 points -- warned each time."""
+    from mirrorcap.core.capture.detect import BETWEEN_CLASSES_MAX_SHARE, between_classes_warning
+
+    reports, printed = {}, {}
+    for name in ("light_crf26", "light"):
+        printed[name] = _tracked(name, tmp_path, capsys)
+        reports[name] = json.loads((tmp_path / f"{name}.json").read_text())
+    washed, clean = reports["light_crf26"]["between_classes"], reports["light"]["between_classes"]
+    assert washed["share"] > 1.5 * BETWEEN_CLASSES_MAX_SHARE and washed["blobs"] > 20000
+    assert clean["share"] < 0.2 * BETWEEN_CLASSES_MAX_SHARE and clean["blobs"] > 20000
+    assert "colour between the colour classes" in printed["light_crf26"]
+    assert "colour between the colour classes" not in printed["light"]
+    assert between_classes_warning("uv", washed) is None
+    clip = ROOT / "sample_scenes" / "normal" / "light_crf26"
+    code, out, err = _run(["detect", clip / "clip.mp4", "--light", "normal", "--rig", clip / "rig.json",
+                           "-o", tmp_path / "d.csv"], capsys)
+    assert code == 0 and "warning: 3.6 % as many blobs as the dots found had a colour between" in out + err
+
+
 def test_a_take_that_measures_few_of_the_dots_it_shows_says_so(tmp_path, capsys):
     """#18, stop 40: small540 (normal light, 960x540, 240 dots of 2.2 mm 700 mm away: 3.2 px across in the direct
     view, 2.8 and 2.5 px in the mirrors; rendered at the stop and held out from the threshold's choice). Video's

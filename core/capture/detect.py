@@ -110,8 +110,9 @@ class DetectionStream:
     ``(frame_number, Detections, view (n,))``. Until the view layout is known (from a
     rig file, or from the first ``LAYOUT_FRAMES`` frames' gaps) detections are buffered
     -- detections, never images. ``extract_s`` accumulates the extraction time and
-    ``processed`` the frames read; ``layout`` is set once known, ``dot_px`` (a dot's diameter,
-    :func:`dot_diameter_px` of the first frames) with it."""
+    ``processed`` the frames read, ``blobs`` the detections and ``between_classes`` the blobs dropped for a
+    hue between the colour classes (normal light, :mod:`.colordots`); ``layout`` is set once known, ``dot_px``
+    (a dot's diameter, :func:`dot_diameter_px` of the first frames) with it."""
 
     def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
                  layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
@@ -123,6 +124,8 @@ class DetectionStream:
         self.progress = progress
         self.extract_s = 0.0
         self.processed = 0
+        self.blobs = 0               # detections kept, and ...
+        self.between_classes = 0     # ... blobs dropped for a hue between the colour classes (normal light)
         self.dot_px = settings.marker_diameter_px
 
     def __iter__(self):
@@ -133,6 +136,8 @@ class DetectionStream:
             det = extractor(frame)
             self.extract_s += time.perf_counter() - t0
             self.processed += 1
+            self.blobs += len(det)
+            self.between_classes += det.between_classes
             if self.progress:
                 self.progress(self.processed)
             if self.dot_px is None:
@@ -223,6 +228,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
             "counts": {**{v: int(c) for v, c in zip(VIEW_NAMES, counts)}, "outside_views": int(counts[-1])},
             "dot_px": dot_px_by_view(np.concatenate(areas), np.concatenate(area_views)),
             "video": source.compression(),
+            "between_classes": between_classes(stream),
             "timings_s": {"total": elapsed, "extract": t_extract, "write": t_write,
                           "decode_and_other": elapsed - t_extract - t_write},
             "frames_per_second": done / elapsed if elapsed > 0 else None,
@@ -247,6 +253,33 @@ NORMAL_LIGHT_MIN_DOT_PX = 3.3
 #: what the warnings on a take's mirrors advise (README, "The rig: what it needs": video quality)
 VIDEO_QUALITY_HINT = ("under normal light, keep the video near-lossless (H.264 CRF 17 or better): compression washes "
                       "out small dots")
+
+
+#: under normal light, more blobs dropped for a hue between the colour classes than this share of the detections
+#: is warned about (:func:`between_classes_warning`): the rendered normal-light clips drop 0.0-1.1 %; re-encoded at
+#: H.264 CRF 20-29, those that lost 7 or more points of their seen marker-frames dropped 2.4-9.0 % (and small540,
+#: whose dots are too small, 16.8 %), those that lost 2-5 points 0.7-1.8 % (stop 41); held out, rose720 at CRF 20
+#: lost 11 and dropped 3.3 %
+BETWEEN_CLASSES_MAX_SHARE = 0.02
+
+
+def between_classes(stream) -> dict:
+    """``{"blobs", "between_classes", "share"}`` of a :class:`DetectionStream` that has run: the detections, the
+    blobs dropped for a hue between the colour classes, and their share of the detections."""
+    return {"blobs": stream.blobs, "between_classes": stream.between_classes,
+            "share": stream.between_classes / max(stream.blobs, 1)}
+
+
+def between_classes_warning(light: str, figures: dict) -> str | None:
+    """The warning when, under ``light`` ``"normal"``, the blobs dropped for a hue between the colour classes
+    (``figures``, :func:`between_classes`) exceed :data:`BETWEEN_CLASSES_MAX_SHARE` of the detections; None
+    otherwise."""
+    if light != "normal" or figures["share"] <= BETWEEN_CLASSES_MAX_SHARE:
+        return None
+    return (f"{100 * figures['share']:.1f} % as many blobs as the dots found had a colour between the colour classes "
+            f"and were dropped ({figures['between_classes']} of {figures['blobs']}; up to 1.1 % on the rigs measured): "
+            "the dots' colours are washed out -- on the clips measured the take then lost 7 to 54 points of the "
+            f"marker-frames it should report; {VIDEO_QUALITY_HINT}, light the face evenly, or use larger dots")
 
 
 def dot_px_by_view(area, view) -> dict:

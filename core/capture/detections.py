@@ -20,6 +20,7 @@ class Detections:
     rgb: np.ndarray = None  # (n, 3) mean colour, normalised to sum 1
     elongation: np.ndarray = None  # (n,) axis ratio from the weighted second moments (1: round)
     contrast: np.ndarray = None  # (n,) normal light: the dot's chromaticity distance from the skin around it
+    between_classes: int = 0  # normal light: blobs dropped for a hue between the colour classes (colordots)
 
     def __len__(self):
         return self.x.size

@@ -38,7 +38,9 @@ frame); ``per_frame`` counts (``candidates``, ``measured``, ``false_tracking``,
 the limit; ``doubted`` and ``repaired``: single-mirror measurements made gaps or re-paired,
 :func:`.gapfill.doubt_outlying_measurements`;
 the tracker's other stages add theirs); ``video`` (:meth:`..capture.video.VideoSource.compression`: mbit_per_s,
-bits_per_pixel; null for image sequences and detections given); ``timings_s`` (``detect``, ``track``,
+bits_per_pixel; null for image sequences and detections given); ``between_classes``
+(:func:`..capture.detect.between_classes`: blobs, between_classes, share -- a warning under normal light above 2 %,
+:func:`..capture.detect.between_classes_warning`; null for detections given); ``timings_s`` (``detect``, ``track``,
 ``track_stages``: seconds per
 tracker stage, ``tracking_frames_per_s``).
 """
@@ -91,7 +93,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
     ``rigid`` names the markers that carry the head pose, as :func:`..capture.rig.rigid_selection` gives
     them (``rigid_source`` says where they came from, for the report)."""
-    from ..capture.detect import DetectionStream, _check_camera
+    from ..capture.detect import DetectionStream, _check_camera, between_classes, between_classes_warning
 
     _check_camera(camera, source)
     extraction = extraction or ExtractionSettings()
@@ -100,6 +102,11 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                              start, end, step, progress)
     numbers, frames = collect_detections(stream)
     t_detect = time.perf_counter() - t0
+    washed = between_classes(stream)
+    log = log if log is not None else MessageLog()
+    washed_out = between_classes_warning(extraction.light, washed)
+    if washed_out:
+        log.warning(washed_out)
     xs = np.concatenate([np.r_[f.direct[:, 0], f.mirror[0][:, 0], f.mirror[1][:, 0]] for f in frames]) if frames \
         else np.zeros(0)
     views = check_view_boundaries(xs, stream.layout, len(frames), stream.dot_px or 0.0) \
@@ -108,7 +115,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
                             rigid_source=rigid_source, log=log, seeds=seeds, view_check=views,
-                            video=source.compression())
+                            video=source.compression(), between=washed)
 
 
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
@@ -128,7 +135,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                      known_length=None, step: int = 1, settings: TrackSettings | None = None, progress=None,
                      timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
                      rigid_source: str = "rig file", log: MessageLog | None = None, seeds=None,
-                     view_check: dict | None = None, video: dict | None = None) -> dict:
+                     view_check: dict | None = None, video: dict | None = None,
+                     between: dict | None = None) -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
     ``rigid``: the markers that carry the head pose, as :func:`core.track.tracker.track` takes them.
@@ -136,7 +144,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     Warnings go to ``log`` (:class:`..common.log.MessageLog`) and REPORT.json's ``warnings``.
     ``view_check``: :func:`..capture.rig.check_view_boundaries` of the detections' view layout
     (REPORT.json ``view_layout``; a warning when a boundary runs through dots); ``video``: the source's
-    :meth:`..capture.video.VideoSource.compression` (REPORT.json ``video``)."""
+    :meth:`..capture.video.VideoSource.compression` (REPORT.json ``video``); ``between``: the detection's
+    :func:`..capture.detect.between_classes` (REPORT.json ``between_classes``)."""
     from ..capture.detect import VIDEO_QUALITY_HINT
     from .mirrorscale import (LINK_MAX_SPREAD, MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
                               link_mirror_scales_by_motion, mirror_agreement, scale_link_warning)
@@ -240,6 +249,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         "mirror_agreement": agreement,
         "coverage": coverage,
         "video": video,
+        "between_classes": between,
         "view_layout": view_check,
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,
