@@ -277,7 +277,8 @@ def between_classes_warning(light: str, figures: dict) -> str | None:
     if light != "normal" or figures["share"] <= BETWEEN_CLASSES_MAX_SHARE:
         return None
     return (f"{100 * figures['share']:.1f} % as many blobs as the dots found had a colour between the colour classes "
-            f"and were dropped ({figures['between_classes']} of {figures['blobs']}; up to 1.1 % on the rigs measured): "
+            f"and were dropped ({figures['between_classes']} dropped, {figures['blobs']} found; up to 1.1 % on the rigs "
+            "measured): "
             "the dots' colours are washed out -- on the clips measured the take then lost 7 to 54 points of the "
             f"marker-frames it should report; {VIDEO_QUALITY_HINT}, light the face evenly, or use larger dots")
 
