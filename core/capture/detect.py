@@ -278,9 +278,8 @@ def between_classes_warning(light: str, figures: dict) -> str | None:
         return None
     return (f"{100 * figures['share']:.1f} % as many blobs as the dots found had a colour between the colour classes "
             f"and were dropped ({figures['between_classes']} dropped, {figures['blobs']} found; up to 1.1 % on the rigs "
-            "measured): "
-            "the dots' colours are washed out -- on the clips measured the take then lost 7 to 54 points of the "
-            f"marker-frames it should report; {VIDEO_QUALITY_HINT}, light the face evenly, or use larger dots")
+            "measured): the dots' colours are washed out -- on the clips measured the take then lost 7 to 54 points "
+            f"of the marker-frames it should report; {VIDEO_QUALITY_HINT}, light the face evenly, or use larger dots")
 
 
 def dot_px_by_view(area, view) -> dict:

@@ -183,6 +183,28 @@ def mirror_agreement(samples: BothMirrorSamples, normals, ds, focal_px: float) -
             "consistent": bool(abs(median) <= AGREEMENT_LIMIT * expected_median) and not scattered}
 
 
+def link_self_calibrated_scales(both: BothMirrorSamples, det: ClipDetections, camera: Camera, normals,
+                                ds) -> tuple[np.ndarray, dict]:
+    """``ds`` (each mirror's self-calibrated distance, in its own units) with mirror 1's put in mirror 0's units,
+    and the link's figures: through the markers seen in both mirrors (:func:`link_mirror_scales`) when they are
+    enough and agree (ratios spread up to :data:`LINK_MAX_SPREAD`); else through the head's motion
+    (:func:`link_mirror_scales_by_motion`; the doubted shared link kept as ``shared_markers_link``); with a head
+    too still for that, through the few markers in both mirrors all the same (:func:`scale_link_warning` says
+    so), and with under ``MIN_BOTH_MIRROR_SIGHTINGS`` of them not at all (the motion link's refusal)."""
+    shared = link_mirror_scales(both, normals, ds) if len(both.p) >= MIN_BOTH_MIRROR_SIGHTINGS else None
+    if shared is not None and both.enough_to_link and shared[1]["relative_spread"] <= LINK_MAX_SPREAD:
+        return shared
+    try:  # the mirrors see only the sides of the face, or the few markers in both disagree
+        out, figures = link_mirror_scales_by_motion(det, camera, normals, ds)
+    except DegenerateError:  # a still head: the few markers in both mirrors are all there is
+        if shared is None:
+            raise
+        return shared
+    if shared is not None and both.enough_to_link:
+        figures["shared_markers_link"] = shared[1]    # the link it stood in for
+    return out, figures
+
+
 def scale_link_warning(link: dict | None) -> str | None:
     """A warning when the two mirrors' scales rest on the markers seen in both mirrors (``link`` from
     :func:`link_mirror_scales`) and those are too few (under ``MIN_BOTH_MIRROR_MARKERS``: one wrong pair

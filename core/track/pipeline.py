@@ -14,7 +14,8 @@ self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's 
 mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
 samples, markers -- or, with fewer than 3 markers in both mirrors or their ratios spread over 0.5 %,
 :func:`.mirrorscale.link_mirror_scales_by_motion`, which adds markers_per_mirror and, in the second case,
-``shared_markers_link``: the doubted link it stands in for; ``source`` says which; null with MIRRORS.json;
+``shared_markers_link``: the doubted link it stands in for (the choice:
+:func:`.mirrorscale.link_self_calibrated_scales`); ``source`` says which; null with MIRRORS.json;
 a warning, :func:`.mirrorscale.scale_link_warning`, when the shared markers' link had to stay though doubted);
 ``mirror_agreement`` (:func:`.mirrorscale.mirror_agreement`:
 markers seen in both mirrors, the median / median-absolute / p95 difference of their depth through
@@ -147,8 +148,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     :meth:`..capture.video.VideoSource.compression` (REPORT.json ``video``); ``between``: the detection's
     :func:`..capture.detect.between_classes` (REPORT.json ``between_classes``)."""
     from ..capture.detect import VIDEO_QUALITY_HINT
-    from .mirrorscale import (LINK_MAX_SPREAD, MIN_BOTH_MIRROR_SIGHTINGS, both_mirror_samples, link_mirror_scales,
-                              link_mirror_scales_by_motion, mirror_agreement, scale_link_warning)
+    from .mirrorscale import both_mirror_samples, link_self_calibrated_scales, mirror_agreement, scale_link_warning
     from .coverage import coverage_warning, take_coverage
     from .selfcal import self_calibrate_mirror
 
@@ -163,19 +163,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         cals = [self_calibrate_mirror(first, camera, k) for k in range(2)]
         normals = np.stack([c.plane.normal for c in cals])
         both = both_mirror_samples(det, camera, normals)
-        own_ds = [c.plane.d for c in cals]
-        shared = link_mirror_scales(both, normals, own_ds) if both.enough_to_link else None
-        if shared is not None and shared[1]["relative_spread"] <= LINK_MAX_SPREAD:
-            ds, scale_link = shared
-        else:  # the mirrors see only the sides of the face, or the few markers in both disagree
-            try:
-                ds, scale_link = link_mirror_scales_by_motion(det, camera, normals, own_ds)
-                if shared is not None:
-                    scale_link["shared_markers_link"] = shared[1]    # the link it stood in for
-            except DegenerateError:  # a still head: the few markers in both mirrors are all there is
-                if len(both.p) < MIN_BOTH_MIRROR_SIGHTINGS:
-                    raise
-                ds, scale_link = shared if shared is not None else link_mirror_scales(both, normals, own_ds)
+        ds, scale_link = link_self_calibrated_scales(both, det, camera, normals, [c.plane.d for c in cals])
         # Self-calibration knows no scale. The tracker's gates, neighbourhoods and noise
         # levels are in mm, so put the face at its nominal distance: the take is then
         # "relative" units that are close to millimetres (a known length makes them exact).
