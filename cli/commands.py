@@ -113,7 +113,7 @@ def detect(args) -> int:
     if args.min_area < 1 or (args.marker_diameter is not None and args.marker_diameter < 0):
         raise MirrorCapError("--min-area must be at least 1 and --marker-diameter non-negative")
     settings = ExtractionSettings(light=light, threshold=args.threshold, min_area=args.min_area,
-                                  marker_diameter_px=args.marker_diameter)
+                                  marker_diameter_px=args.marker_diameter, washed_out=args.washed_out)
     source, start, end = _open(args)
     report = run_detection(source, args.output, colors=colors, settings=settings, layout=layout, camera=camera,
                            start=start, end=end, step=args.step,
@@ -158,7 +158,8 @@ def track(args) -> int:
     seeds = read_seeds(args.seeds, camera.image_size) if args.seeds else None
     source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
-                       colors=colors, extraction=ExtractionSettings(light=light), layout=rig.views, mirrors=mirrors,
+                       colors=colors, extraction=ExtractionSettings(light=light, washed_out=args.washed_out),
+                       layout=rig.views, mirrors=mirrors,
                        known_length=known, start=start, end=end,
                        step=args.step, face_distance_mm=args.face_distance, settings=settings, rigid=rigid,
                        rigid_source=rigid_source, seeds=seeds)

@@ -61,6 +61,13 @@ def _light_option(parser) -> None:
                              "lamps (default: what COLORS.json says, else uv)")
 
 
+def _washed_out_option(parser) -> None:
+    parser.add_argument("--washed-out", choices=("auto", "keep", "drop"), default="auto",
+                        help="normal light: dots whose colour compression washed out between the colour classes -- "
+                             "kept (classed by their colour less the skin's), dropped, or auto: kept when the first "
+                             "30 frames hold more than 2 %% as many of them as other dots (default auto)")
+
+
 def _unseen_options(parser) -> None:
     unseen = parser.add_mutually_exclusive_group()
     unseen.add_argument("--drop-unseen", action="store_true",
@@ -149,6 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     det.add_argument("--camera", help="CAMERA.json; its image size must match the video")
     det.add_argument("--colors", help="COLORS.json colour classes (default: the light's four colours)")
     _light_option(det)
+    _washed_out_option(det)
     det.add_argument("--rig", help="RIG.json with view rectangles (default: split at the two widest gaps)")
     det.add_argument("--threshold", type=float, default=60.0, help="brightness threshold on max(R,G,B), 0..254")
     det.add_argument("--min-area", type=int, default=4, help="smallest marker in pixels (default 4)")
@@ -175,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "is within MM; the rest stay gaps (default 2; 'inf' keeps every conjecture, 0 none)")
     trk.add_argument("--colors", help="COLORS.json colour classes (default: the light's four colours)")
     _light_option(trk)
+    _washed_out_option(trk)
     trk.add_argument("--rig", help="RIG.json view rectangles, and optionally the rigid markers (\"rigid\")")
     trk.add_argument("--seeds", metavar="SEEDS.csv",
                      help="markers designated by hand in the first tracked frame (id,view,x,y): each id's "

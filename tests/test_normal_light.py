@@ -32,13 +32,15 @@ def _run(args, capsys):
     return code, out.out, out.err
 
 
-def _tracked(name, tmp_path, capsys) -> str:
-    """``mirrorcap track`` on ``sample_scenes/normal/<name>`` as a user runs it (its rig file's views, normal light),
-    the take and its report written to ``tmp_path / <name>.c3d`` and ``.json``; returns what it printed."""
+def _tracked(name, tmp_path, capsys, *options, out_name: str | None = None) -> str:
+    """``mirrorcap track`` on ``sample_scenes/normal/<name>`` as a user runs it (its rig file's views, normal light,
+    any further ``options``), the take and its report written to ``tmp_path / <out_name or name>.c3d`` and
+    ``.json``; returns what it printed."""
     clip = ROOT / "sample_scenes" / "normal" / name
+    out_name = out_name or name
     code, out, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
-                           "--rig", clip / "rig.json", "-o", tmp_path / f"{name}.c3d", "--report",
-                           tmp_path / f"{name}.json"], capsys)
+                           "--rig", clip / "rig.json", "-o", tmp_path / f"{out_name}.c3d", "--report",
+                           tmp_path / f"{out_name}.json", *options], capsys)
     assert code == 0, err
     return out + err
 
@@ -436,13 +438,14 @@ def test_a_video_compressed_too_hard_links_the_mirrors_by_head_motion_and_says_s
     the agreement check, whose median difference the link sets to zero, passed it. Now a shared markers' link
     that spreads over 0.5 % (the 40 sound clips: 0.01-0.27 %) gives way to the head-motion link, and a scatter
     ten times the expected sd (the 40 clips: 0.6-4.2 times) is a warning: 0.56 mm RMS, 32 points over 2 mm. At
-    CRF 29 one marker is seen in both mirrors and the head-motion link is refused: the take is still 3.8 mm off,
-    and now says that its mirrors' scales rest on one marker."""
+    CRF 29 with its washed-out dots dropped (``--washed-out drop``, as before stop 42) one marker is seen in both
+    mirrors and the head-motion link is refused: the take is 3.8 mm off, and says that its mirrors' scales rest on
+    one marker. (Kept, as they are by default at CRF 29, those dots give 0.59 mm: the next test.)"""
     from mirrorcap.core.track.mirrorscale import LINK_MAX_SPREAD
 
     runs = {}
-    for name in ("hd_crf26", "hd_crf29"):
-        text = _tracked(name, tmp_path, capsys)
+    for name, options in (("hd_crf26", ()), ("hd_crf29", ("--washed-out", "drop"))):
+        text = _tracked(name, tmp_path, capsys, *options)
         clip = ROOT / "sample_scenes" / "normal" / name
         runs[name] = (*scored_take(clip, tmp_path / f"{name}.c3d", tmp_path / f"{name}.json"), text)
     for name, (_, report, _, text) in runs.items():     # the video's compression, recorded
@@ -504,6 +507,73 @@ def test_a_take_whose_dots_colours_are_washed_out_says_so(tmp_path, capsys):
     assert code == 0 and "warning: 3.6 % as many blobs as the dots found had a colour between" in out + err
 
 
+def test_washed_out_dots_are_classed_by_their_colour_less_the_skins():
+    """#18, stop 42: a dot blended with the skin around it -- video compression, a small image -- has a chromaticity
+    ``a * paint + (1 - a) * skin``. Its own hue drifts towards the skin's as ``a`` falls, out of its class's 35 deg,
+    but its colour less the skin's, ``a * (paint - skin)``, keeps one direction: the paint's as seen from the skin
+    (:func:`colordots.difference_hue`). For the four default paints on three skins, down to a fifth of the paint,
+    that direction names the right class every time where the blob's own hue, at a fifth, misses for some."""
+    from mirrorcap.core.capture.colordots import difference_hue, hue_apart, hue_saturation
+
+    classes = ColorClasses.default("normal")
+    centres = classes.hue_centres()
+    paints = {"blue": (30, 70, 230), "green": (30, 175, 60), "yellow": (245, 215, 20), "magenta": (215, 30, 175)}
+    own_missed = 0
+    for skin in ((235, 190, 165), (200, 150, 120), (120, 80, 60)):
+        skin_c = np.asarray(skin, float) / sum(skin)
+        for name, paint in paints.items():
+            paint_c = np.asarray(paint, float) / sum(paint)
+            for a in (1.0, 0.6, 0.35, 0.2):
+                blob = a * paint_c + (1.0 - a) * skin_c
+                by_difference = np.argmin(hue_apart(difference_hue(blob, skin_c)[:, None], centres[None]), axis=1)[0]
+                assert classes.names[by_difference] == name, (skin, name, a)
+                own = np.degrees(hue_apart(hue_saturation(blob)[0][:, None], centres[None]))[0]
+                own_missed += a == 0.2 and (own.min() > 35.0 or classes.names[int(np.argmin(own))] != name)
+    assert own_missed >= 6        # what the blob's own hue does with them: out of every class, or another's
+
+
+@pytest.mark.parametrize("setting, share, kept", [("auto", 0.021, True), ("auto", 0.019, False), ("keep", 0.0, True),
+                                                  ("drop", 0.5, False)])
+def test_which_takes_keep_the_washed_out_dots(setting, share, kept):
+    """``ExtractionSettings.washed_out``: "auto" keeps the dots between the colour classes when the first frames hold
+    more than BETWEEN_CLASSES_MAX_SHARE (2 %) as many as the other dots; "keep" and "drop" always do as they say."""
+    from mirrorcap.core.capture.detect import BETWEEN_CLASSES_MAX_SHARE, keeps_between
+
+    assert BETWEEN_CLASSES_MAX_SHARE == 0.02
+    assert keeps_between(setting, int(round(share * 10000)), 10000) is kept
+    with pytest.raises(InputError, match="washed_out must be one of"):
+        ExtractionSettings(light="normal", washed_out="sometimes")
+
+
+def test_a_washed_out_take_keeps_its_dots_between_the_classes(tmp_path, capsys):
+    """#18, stop 42: blobs of a hue between the colour classes, kept and classed by their colour less the skin's
+    when the first 30 frames hold more than 2 % of them. light_crf26 (3.6 %) tracks 94.8 % of its seen
+    marker-frames against 92.3 % with them dropped (``--washed-out drop``, the take of stop 41); hd_crf29 (2.4 %),
+    whose mirrors' scales had rested on one marker (3.8 mm RMS), links them through the head's motion: 0.59 mm.
+    The light clip as rendered (0.13 %) keeps nothing and tracks as before, 99.6 %. Held out (rendered at the stop
+    after the rule was set, not in the repository: sand720 and umber600 re-encoded at CRF 20-26), the five takes
+    over 2 % went from 16-83 to 34-89 % of their seen marker-frames, their identity switches 1,222 -> 33."""
+    scores = {}
+    for name, options, out_name in (("light_crf26", (), "kept"), ("light_crf26", ("--washed-out", "drop"), "dropped"),
+                                    ("hd_crf29", (), "hd_crf29"), ("light", (), "light")):
+        text = _tracked(name, tmp_path, capsys, *options, out_name=out_name)
+        clip = ROOT / "sample_scenes" / "normal" / name
+        scores[out_name] = (*scored_take(clip, tmp_path / f"{out_name}.c3d", tmp_path / f"{out_name}.json"), text)
+    kept, dropped = scores["kept"][0], scores["dropped"][0]
+    print({k: (round(100 * v[0]["seen_reported_fraction"], 2), round(v[0]["rms_mm"], 3)) for k, v in scores.items()})
+    assert scores["kept"][1]["between_classes"]["kept"] is True
+    assert scores["dropped"][1]["between_classes"]["kept"] is False
+    assert kept["seen_reported_fraction"] > 0.945 and dropped["seen_reported_fraction"] < 0.93
+    assert kept["identity_switches"] == 0 and kept["rms_mm"] < 0.55
+    assert "They were kept, each classed by its colour less the skin's" in scores["kept"][3]
+    assert "and they were dropped" in scores["dropped"][3]
+    hd, report = scores["hd_crf29"][0], scores["hd_crf29"][1]
+    assert report["between_classes"]["kept"] is True and report["mirror_scale_link"]["source"].startswith("head motion")
+    assert hd["rms_mm"] < 1.0 and hd["identity_switches"] == 0 and hd["seen_reported_fraction"] > 0.87
+    light, report = scores["light"][0], scores["light"][1]
+    assert report["between_classes"]["kept"] is False and light["seen_reported_fraction"] > 0.995
+
+
 def test_a_take_that_measures_few_of_the_dots_it_shows_says_so(tmp_path, capsys):
     """#18, stop 40: small540 (normal light, 960x540, 240 dots of 2.2 mm 700 mm away: 3.2 px across in the direct
     view, 2.8 and 2.5 px in the mirrors; rendered at the stop and held out from the threshold's choice). Video's
@@ -511,14 +581,16 @@ def test_a_take_that_measures_few_of_the_dots_it_shows_says_so(tmp_path, capsys)
     images a frame. The command ran to its end, exit 0, and wrote a take of 5 markers of 240 -- 1 % of the seen
     marker-frames -- with nothing but the count of undecided markers to say so. REPORT.json's ``coverage`` now
     says a typical frame measures 1 of the 146 dots its direct view shows, and one warning line says so with the
-    dots' sizes; the light clip (99 %) has no such line."""
+    dots' sizes; the light clip (99 %) has no such line. (Stop 42: its dots' colours wash out between the classes --
+    16.8 % as many as the dots found -- and kept, they lift the typical frame's share from 0.7 % to 10 %: still far
+    short of the 30 % the warning asks for.)"""
     runs = {}
     for name in ("small540", "light"):
         text = _tracked(name, tmp_path, capsys)
         runs[name] = (json.loads((tmp_path / f"{name}.json").read_text()), text)
     report, text = runs["small540"]
     coverage = report["coverage"]
-    assert coverage["enough"] is False and coverage["measured_share"] < 0.05 and coverage["direct_dots"] > 100
+    assert coverage["enough"] is False and coverage["measured_share"] < 0.15 and coverage["direct_dots"] > 100
     assert max(coverage["dot_px"][1:]) < 3.0 and coverage["dot_px"][0] > max(coverage["dot_px"][1:])
     warned = [w for w in report["warnings"] if w.startswith("in a typical frame the take measures")]
     assert len(warned) == 1 and "px in the mirrors" in warned[0]

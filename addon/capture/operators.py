@@ -90,7 +90,8 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
 
     def run(self, context):
         from ...core.capture.markers import marker_extractor
-        from ...core.capture.detect import dot_diameter_px, dot_px_by_view, dot_px_text, small_dot_warning
+        from ...core.capture.detect import (between_chosen, dot_diameter_px, dot_px_by_view, dot_px_text, keeps_between,
+                                            small_dot_warning)
         from ...core.capture.rig import split_views_by_gaps
         from ...core.capture.video import open_source
         from ..common.clip import detections_to_clip_tracks, find_clip
@@ -104,6 +105,8 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         rig, colors = rig_and_colours(s)
         settings = extraction_settings(s)
         det = marker_extractor(colors, settings)(image)
+        between = det.between_count()       # washed-out dots: as a take would decide, from this one frame
+        det = between_chosen(det, keeps_between(settings.washed_out, between, len(det) - between))
         if len(det) == 0:
             raise InputError(f"no markers found in frame {n}: " + ("are there coloured dots of the colour classes on "
                              "the face?" if s.light == "normal" else "is the clip dark with bright dots? (coloured dots "

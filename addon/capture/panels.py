@@ -23,6 +23,8 @@ class MIRRORCAP_PT_capture(SidebarPanel, bpy.types.Panel):
         col.prop(s, "rig")
         col.prop(s, "colors")
         col.prop(s, "light", expand=True)
+        if s.light == "normal":
+            col.prop(s, "washed_out")
         col.separator()
         col.operator("mirrorcap.detect_markers", icon="TRACKER")
         col.prop(s, "mirrors")

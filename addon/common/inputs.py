@@ -65,10 +65,10 @@ def rig_and_colours(s):
 
 
 def extraction_settings(s):
-    """The marker extraction settings of the scene's light."""
+    """The marker extraction settings of the scene's light (and, under normal light, of its washed-out dots)."""
     from ...core.capture.markers import ExtractionSettings
 
-    return ExtractionSettings(light=s.light)
+    return ExtractionSettings(light=s.light, washed_out=s.washed_out)
 
 
 def rigid_from_settings(s, rig, colours):

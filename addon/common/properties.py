@@ -25,6 +25,9 @@ LIGHTS = (("uv", "UV", "fluorescent markers under black-light lamps"),
           ("normal", "Normal", "coloured dots under ordinary lamps"))
 RETARGET_METHODS = (("arkit", "ARKit-52", "solve ARKit weights and key the character's shape keys of the same names"),
                     ("transfer", "Transfer", "carry the motion itself onto a character with lm_* landmarks"))
+WASHED_OUT = (("auto", "Auto", "keep them when the first 30 frames hold more than 2 % as many as other dots"),
+              ("keep", "Keep", "keep them, each classed by its colour less the skin's"),
+              ("drop", "Drop", "drop them"))
 BAKE_MODES = (("frames", "Frames", "one shape key per take frame, keyed on its frame"),
               ("pca", "PCA", "K eigen-deformation shape keys with keyed weights (compact)"))
 
@@ -46,6 +49,9 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
                                       "their ids become their labels (optional)")
     light: EnumProperty(name="Light", items=LIGHTS, default="uv",
                         description="how the markers were lit: fluorescent under black light, or coloured dots")
+    washed_out: EnumProperty(name="Washed-out Dots", items=WASHED_OUT, default="auto",
+                             description="normal light: dots whose colour video compression washed out between the "
+                                         "colour classes")
     take: StringProperty(name="Take", subtype="FILE_PATH", default="//take.c3d", description="TAKE.c3d to write or read")
     frame_start: IntProperty(name="First Frame", default=0, min=0, description="first video frame to track (0-based)")
     frame_end: IntProperty(name="End Frame", default=0, min=0, description="video frame to stop before (0: the end)")

@@ -20,6 +20,8 @@ class MIRRORCAP_PT_track(SidebarPanel, bpy.types.Panel):
         row.prop(s, "frame_end")
         col.prop(s, "conjecture_limit_mm")
         col.prop(s, "light", expand=True)
+        if s.light == "normal":
+            col.prop(s, "washed_out")
         col.prop(s, "seeds")
         box = col.box()
         box.label(text="Rigid markers (head pose): all 0 = RIG.json / automatic")

@@ -39,9 +39,13 @@ change when a lamp dims or a surface turns away from it -- against the *local* b
    face's silhouette stay under it.
 
 Blobs that pass every test but the hue's, with a hue at least :data:`BETWEEN_FROM_SKIN_DEG` from the
-skin's, are counted (``between_classes``): dots whose colour fell between the classes. Video compression
-does that to small dots (stop 41: 0.0-1.1 % of the kept blobs on the rendered clips, 2.4-9.0 % on clips
-re-encoded until they lost 7-54 points of their seen marker-frames).
+skin's, are dots whose colour fell *between the classes* (``Detections.between``). Video compression does that
+to small dots (stop 41: 0.0-1.1 % as many as the kept blobs on the rendered clips, 2.4-9.0 % on clips
+re-encoded until they lost 7-54 points of their seen marker-frames): it pulls the dot's colour towards the
+skin's, so the blob's own hue drifts, but the hue of its colour *less the skin's* (:func:`difference_hue`)
+still points to its paint -- the right class for every such blob on a dot in four clips (stop 42), against
+72-90 % for the blob's own hue. They are returned with that class and flagged; whether a take keeps them is
+:class:`.detect.DetectionStream`'s decision (``ExtractionSettings.washed_out``).
 
 The output is the UV extractor's :class:`~.detections.Detections` (``intensity`` is the blob's
 mean brightest channel), so everything downstream -- views, DETECTIONS.csv, tracking -- is
@@ -70,7 +74,7 @@ SPLIT_APART_PX = 2.0
 SPLIT_SHARE = 0.25
 SPLIT_FAR_PX = 3.0
 #: a blob that passes every test but its hue's -- more than ``max_hue_deg`` from every class, yet this far from the
-#: skin's -- is a dot whose colour fell between the classes (:attr:`.detections.Detections.between_classes`): what
+#: skin's -- is a dot whose colour fell between the classes (:attr:`.detections.Detections.between`): what
 #: video compression does to small dots (:func:`.detect.between_classes_warning`)
 BETWEEN_FROM_SKIN_DEG = 60.0
 
@@ -89,6 +93,15 @@ def hue_apart(hue_a, hue_b) -> np.ndarray:
     wrap at +-pi."""
     return np.abs((np.asarray(hue_a) - np.asarray(hue_b) + np.pi) % (2.0 * np.pi) - np.pi)
 
+
+
+def difference_hue(rgb, skin_rgb) -> np.ndarray:
+    """Hue angle (radians) of the chromaticity difference ``rgb - skin_rgb`` (both ``(n, 3)``, each normalised
+    to sum 1): the direction in which a dot's colour lies from the skin's, as :func:`hue_saturation` measures a
+    colour's direction from grey. A dot blended with the skin around it -- video compression, a small or
+    grazing image -- moves along that direction, so its difference keeps the paint's hue."""
+    d = np.asarray(rgb, float).reshape(-1, 3) - np.asarray(skin_rgb, float).reshape(-1, 3)
+    return np.arctan2(np.sqrt(3.0) * (d[:, 1] - d[:, 2]), 2.0 * d[:, 0] - d[:, 1] - d[:, 2])
 
 
 def split_by_colour(lab, n_blobs: int, hue, xs, ys, weight, class_hues, settings) -> tuple:
@@ -243,8 +256,14 @@ class ColorDotExtractor:
             hue_ok = from_skin >= FROM_SKIN_DEG
         dot_like = ((saturation >= s.min_saturation) & (sums[:, 3] >= s.min_area) & (elongation <= s.max_streak)
                     & (blob_contrast >= s.min_dot_contrast))
-        keep = hue_ok & dot_like
-        between = int(np.count_nonzero(dot_like & ~hue_ok & (from_skin >= BETWEEN_FROM_SKIN_DEG)))
+        between = dot_like & ~hue_ok & (from_skin >= BETWEEN_FROM_SKIN_DEG)
+        if s.max_hue_deg < 180.0 and between.any():   # classed by their colour less the skin's (module text)
+            skin = sums[between, 11:14] / sums[between, :1]
+            cls[between] = np.argmin(hue_apart(difference_hue(rgb[between], skin)[:, None], self._class_hues[None]),
+                                     axis=1)
+        else:
+            between[:] = False
+        keep = (hue_ok & dot_like) | between
         return Detections(x=cx[keep], y=cy[keep], color=cls[keep], area=sums[keep, 3].astype(int),
                           intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep],
-                          contrast=blob_contrast[keep], between_classes=between)
+                          contrast=blob_contrast[keep], between=between[keep])

@@ -107,12 +107,14 @@ def _nothing_found_hint(settings: ExtractionSettings) -> str:
 
 class DetectionStream:
     """Detections of a source frame by frame, each assigned to its view: iterate to get
-    ``(frame_number, Detections, view (n,))``. Until the view layout is known (from a
-    rig file, or from the first ``LAYOUT_FRAMES`` frames' gaps) detections are buffered
-    -- detections, never images. ``extract_s`` accumulates the extraction time and
-    ``processed`` the frames read, ``blobs`` the detections and ``between_classes`` the blobs dropped for a
-    hue between the colour classes (normal light, :mod:`.colordots`); ``layout`` is set once known, ``dot_px``
-    (a dot's diameter, :func:`dot_diameter_px` of the first frames) with it."""
+    ``(frame_number, Detections, view (n,))``. The first ``LAYOUT_FRAMES`` frames' detections are
+    buffered -- detections, never images -- until three things are known from them: the view layout
+    (a rig file's, or their gaps'), ``dot_px`` (a dot's diameter, :func:`dot_diameter_px`) and, under
+    normal light, whether the dots whose colour fell between the classes are kept (``keep_between``;
+    ``ExtractionSettings.washed_out``: ``"auto"`` keeps them when they number more than
+    :data:`BETWEEN_CLASSES_MAX_SHARE` of the other dots there, :func:`keeps_between`). ``extract_s``
+    accumulates the extraction time and ``processed`` the frames read, ``blobs`` the detections
+    (between-class blobs not counted) and ``between_classes`` the between-class blobs, kept or not."""
 
     def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
                  layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
@@ -124,43 +126,69 @@ class DetectionStream:
         self.progress = progress
         self.extract_s = 0.0
         self.processed = 0
-        self.blobs = 0               # detections kept, and ...
-        self.between_classes = 0     # ... blobs dropped for a hue between the colour classes (normal light)
+        self.blobs = 0               # detections of a colour class, and ...
+        self.between_classes = 0     # ... blobs of a hue between the colour classes (normal light)
+        self.keep_between = None     # are the latter kept? (decided after the first frames)
         self.dot_px = settings.marker_diameter_px
 
     def __iter__(self):
         extractor = marker_extractor(self.colors, self.settings)
-        pending, first = [], []
+        pending = []
         for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
             t0 = time.perf_counter()
             det = extractor(frame)
             self.extract_s += time.perf_counter() - t0
             self.processed += 1
-            self.blobs += len(det)
-            self.between_classes += det.between_classes
+            between = det.between_count()
+            self.blobs += len(det) - between
+            self.between_classes += between
             if self.progress:
                 self.progress(self.processed)
-            if self.dot_px is None:
-                first.append(det)
-                if len(first) >= min(LAYOUT_FRAMES, self.total):
-                    self.dot_px = dot_diameter_px(self.settings, first)
-            if self.layout is None:
+            if self.keep_between is None:
                 pending.append((n, det))
                 if len(pending) >= min(LAYOUT_FRAMES, self.total):
-                    self.layout = _layout_from(pending, self.settings, self.source)
-                    for m, d in pending:
-                        yield m, d, self.layout.assign(d.x, d.y)
+                    yield from self._first_frames(pending)
                     pending = []
             else:
+                det = self._chosen(det)
                 yield n, det, self.layout.assign(det.x, det.y)
-        if self.dot_px is None:
-            self.dot_px = dot_diameter_px(self.settings, first)
-        if self.layout is None:
+        if self.keep_between is None:
             if self.processed == 0:
                 raise InputError(f"no frame could be read from {self.source.path}")
-            self.layout = _layout_from(pending, self.settings, self.source)
-            for m, d in pending:
-                yield m, d, self.layout.assign(d.x, d.y)
+            yield from self._first_frames(pending)
+
+    def _chosen(self, det):
+        """``det`` without its between-class blobs unless they are kept."""
+        return between_chosen(det, self.keep_between)
+
+    def _first_frames(self, pending):
+        """Decide from the buffered first frames ``pending`` (``(frame number, Detections)``) whether the
+        between-class blobs are kept, a dot's diameter and the view layout; yield those frames."""
+        self.keep_between = keeps_between(self.settings.washed_out, self.between_classes, self.blobs)
+        chosen = [(n, self._chosen(det)) for n, det in pending]
+        if self.dot_px is None:
+            self.dot_px = dot_diameter_px(self.settings, [det for _, det in chosen])
+        if self.layout is None:
+            self.layout = _layout_from(chosen, self.settings, self.source)
+        for n, det in chosen:
+            yield n, det, self.layout.assign(det.x, det.y)
+
+
+def between_chosen(det, keep: bool):
+    """:class:`.detections.Detections` ``det`` with its blobs of a hue between the colour classes if ``keep``, else
+    without them."""
+    return det if keep or not det.between_count() else det.subset(~det.between)
+
+
+def keeps_between(washed_out: str, between: int, blobs: int) -> bool:
+    """Are the blobs whose hue fell between the colour classes kept (``ExtractionSettings.washed_out``)?
+    ``"auto"``: when the first frames hold ``between`` of them against ``blobs`` dots of a class, more than
+    :data:`BETWEEN_CLASSES_MAX_SHARE` of those -- a video whose compression washed the dots' colours out (the
+    figures at :data:`BETWEEN_CLASSES_MAX_SHARE`). Where the colours are sound, such blobs are mostly a dot's
+    rim or a grazing image, and kept they change nothing for the better."""
+    if washed_out == "keep":
+        return True
+    return washed_out == "auto" and between > BETWEEN_CLASSES_MAX_SHARE * max(blobs, 1)
 
 
 def _check_camera(camera: Camera | None, source: VideoSource):
@@ -255,31 +283,36 @@ VIDEO_QUALITY_HINT = ("under normal light, keep the video near-lossless (H.264 C
                       "out small dots")
 
 
-#: under normal light, more blobs dropped for a hue between the colour classes than this share of the detections
-#: is warned about (:func:`between_classes_warning`): the rendered normal-light clips drop 0.0-1.1 %; re-encoded at
-#: H.264 CRF 20-29, those that lost 7 or more points of their seen marker-frames dropped 2.4-9.0 % (and small540,
-#: whose dots are too small, 16.8 %), those that lost 2-5 points 0.7-1.8 % (stop 41); held out, rose720 at CRF 20
-#: lost 11 and dropped 3.3 %
+#: under normal light, more blobs of a hue between the colour classes than this share of the other detections is
+#: warned about (:func:`between_classes_warning`), and from the first frames' share such blobs are kept
+#: (:func:`keeps_between`): the rendered normal-light clips hold 0.0-1.1 %; re-encoded at H.264 CRF 20-29, those
+#: that lost 7 or more points of their seen marker-frames 2.4-9.0 % (and small540, whose dots are too small,
+#: 16.8 %), those that lost 2-5 points 0.7-1.8 % (stop 41); held out, rose720 at CRF 20 lost 11 and held 3.3 %
 BETWEEN_CLASSES_MAX_SHARE = 0.02
 
 
 def between_classes(stream) -> dict:
-    """``{"blobs", "between_classes", "share"}`` of a :class:`DetectionStream` that has run: the detections, the
-    blobs dropped for a hue between the colour classes, and their share of the detections."""
+    """``{"blobs", "between_classes", "share", "kept"}`` of a :class:`DetectionStream` that has run: the detections
+    of a colour class, the blobs of a hue between the classes, their share of the former, and whether they were
+    kept (:func:`keeps_between`)."""
     return {"blobs": stream.blobs, "between_classes": stream.between_classes,
-            "share": stream.between_classes / max(stream.blobs, 1)}
+            "share": stream.between_classes / max(stream.blobs, 1), "kept": bool(stream.keep_between)}
 
 
 def between_classes_warning(light: str, figures: dict) -> str | None:
-    """The warning when, under ``light`` ``"normal"``, the blobs dropped for a hue between the colour classes
-    (``figures``, :func:`between_classes`) exceed :data:`BETWEEN_CLASSES_MAX_SHARE` of the detections; None
-    otherwise."""
+    """The warning when, under ``light`` ``"normal"``, the blobs of a hue between the colour classes (``figures``,
+    :func:`between_classes`) exceed :data:`BETWEEN_CLASSES_MAX_SHARE` of the detections; None otherwise."""
     if light != "normal" or figures["share"] <= BETWEEN_CLASSES_MAX_SHARE:
         return None
-    return (f"{100 * figures['share']:.1f} % as many blobs as the dots found had a colour between the colour classes "
-            f"and were dropped ({figures['between_classes']} dropped, {figures['blobs']} found; up to 1.1 % on the rigs "
-            "measured): the dots' colours are washed out -- on the clips measured the take then lost 7 to 54 points "
-            f"of the marker-frames it should report; {VIDEO_QUALITY_HINT}, light the face evenly, or use larger dots")
+    found = (f"{100 * figures['share']:.1f} % as many blobs as the dots found had a colour between the colour classes "
+             f"({figures['between_classes']} of them, {figures['blobs']} dots; up to 1.1 % on the rigs measured): "
+             "the dots' colours are washed out")
+    if figures.get("kept"):
+        return (f"{found}. They were kept, each classed by its colour less the skin's: on the clips measured that "
+                "won back a quarter to a half of the marker-frames lost, but such a take still loses some and is "
+                f"likelier to mislabel a marker; {VIDEO_QUALITY_HINT}, light the face evenly, or use larger dots")
+    return (f"{found}, and they were dropped: on the clips measured the take then lost 7 to 54 points of the "
+            f"marker-frames it should report; {VIDEO_QUALITY_HINT}, light the face evenly, or use larger dots")
 
 
 def dot_px_by_view(area, view) -> dict:

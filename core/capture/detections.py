@@ -20,7 +20,17 @@ class Detections:
     rgb: np.ndarray = None  # (n, 3) mean colour, normalised to sum 1
     elongation: np.ndarray = None  # (n,) axis ratio from the weighted second moments (1: round)
     contrast: np.ndarray = None  # (n,) normal light: the dot's chromaticity distance from the skin around it
-    between_classes: int = 0  # normal light: blobs dropped for a hue between the colour classes (colordots)
+    between: np.ndarray = None  # (n,) bool, normal light: a dot whose hue fell between the colour classes, classed
+    # by its colour less the skin's (colordots); None: no such blobs looked for (UV)
+
+    def between_count(self) -> int:
+        """How many of the blobs are :attr:`between` the colour classes (0 where none were looked for)."""
+        return 0 if self.between is None else int(np.count_nonzero(self.between))
+
+    def subset(self, keep) -> "Detections":
+        """The blobs where ``keep`` ``(n,)`` (bool) holds, every per-blob array cut alike."""
+        return Detections(**{name: (value[keep] if isinstance(value, np.ndarray) else value)
+                             for name, value in self.__dict__.items()})
 
     def __len__(self):
         return self.x.size

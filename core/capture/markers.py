@@ -187,6 +187,10 @@ def capture_light(light: str | None, colors: "ColorClasses | None" = None) -> st
     return light or (colors.light if colors is not None and colors.light else "uv")
 
 
+#: :attr:`ExtractionSettings.washed_out`'s values
+WASHED_OUT_CHOICES = ("auto", "keep", "drop")
+
+
 @dataclass
 class ExtractionSettings:
     light: str = "uv"  # "uv": fluorescent markers (this module); "normal": coloured dots (.colordots)
@@ -209,10 +213,14 @@ class ExtractionSettings:
     min_saturation: float = 0.25  # a dot's colour is saturated (skin sits at ~0.2)
     min_dot_contrast: float = 0.15  # a dot's mean chromaticity distance from the skin around it
     max_streak: float = 3.0  # axis ratio above which a blob is a streak, not a dot
+    washed_out: str = "auto"  # dots whose hue fell between the colour classes: "keep", "drop", or "auto" -- kept
+    # when the first frames hold more of them than capture.detect.BETWEEN_CLASSES_MAX_SHARE (DetectionStream)
 
     def __post_init__(self):
         if self.light not in LIGHTS:
             raise InputError(f"light must be one of {', '.join(LIGHTS)}, not {self.light!r}")
+        if self.washed_out not in WASHED_OUT_CHOICES:
+            raise InputError(f"washed_out must be one of {', '.join(WASHED_OUT_CHOICES)}, not {self.washed_out!r}")
 
 
 CLUMP_AREA = 1.8  # split_clumps: a clump of touching dots has at least this many times the frame's median area

@@ -40,8 +40,8 @@ the limit; ``doubted`` and ``repaired``: single-mirror measurements made gaps or
 :func:`.gapfill.doubt_outlying_measurements`;
 the tracker's other stages add theirs); ``video`` (:meth:`..capture.video.VideoSource.compression`: mbit_per_s,
 bits_per_pixel; null for image sequences and detections given); ``between_classes``
-(:func:`..capture.detect.between_classes`: blobs, between_classes, share -- a warning under normal light above 2 %,
-:func:`..capture.detect.between_classes_warning`; null for detections given); ``timings_s`` (``detect``, ``track``,
+(:func:`..capture.detect.between_classes`: blobs, between_classes, share, kept -- a warning under normal light above
+2 %, :func:`..capture.detect.between_classes_warning`; null for detections given); ``timings_s`` (``detect``, ``track``,
 ``track_stages``: seconds per
 tracker stage, ``tracking_frames_per_s``).
 """
