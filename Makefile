@@ -150,7 +150,9 @@ stress-clips: $(STAMP)
 # small540 (960x540, medium skin, 240 dots of 2.2 mm 700 mm away -- 3.2 px across, 2.5-2.8 px in the mirrors: too
 # small for the detector under normal light, kept to check that the take says so; stop 40); four576 (1024x576, a
 # skin of sRGB 200,150,120, 200 dots of 2.7 mm: 4.0 px; held out at stop 40); rose720 (1280x720, a skin of sRGB
-# 215,165,140, 190 dots of 2.5 mm 660 mm away: 4.1 px in the mirrors, 60 frames; held out at stop 41). About 95 minutes.
+# 215,165,140, 190 dots of 2.5 mm 660 mm away: 4.1 px in the mirrors, 60 frames; held out at stop 41); umber600
+# (960x600, a skin of sRGB 125,85,65, 180 dots of 3 mm 680 mm away, mirrors at 42 deg, 60 frames; held out at stop
+# 42). About 100 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -180,13 +182,17 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 215,165,140 --out sample_scenes/normal/rose720 \
 		--size 1280 720 --focal 1150 --markers 190 --marker-mm 2.5 --mirror-deg 45 --distance 660 --head-deg 8 12 5 \
 		--tempo 1.6 --frames 60 --samples 4 --seed 611 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 125,85,65 --out sample_scenes/normal/umber600 \
+		--size 960 600 --focal 950 --markers 180 --marker-mm 3.0 --mirror-deg 42 --distance 680 --head-deg 9 10 6 \
+		--tempo 1.8 --frames 60 --samples 4 --seed 7433 --no-scan
 
 # The normal-light clips above as a camera or a screen recorder would keep them (issue #18, stop 41): hd re-encoded
 # through Blender's FFmpeg at H.264 CRF 26 and 29 (4.1 and 2.0 Mbit/s at 1080p), light at CRF 26 (3.5 Mbit/s at
-# 720p), rose720 at CRF 20 (6.1 Mbit/s). The rendered clips are kept at CRF 17. A minute.
+# 720p), rose720 at CRF 20 (6.1 Mbit/s), umber600 at CRF 23 (stop 42). The rendered clips are kept at CRF 17. A minute.
 compressed-clips: $(STAMP)
 	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/hd sample_scenes/normal/hd_crf26 --quality LOW
 	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/hd sample_scenes/normal/hd_crf29 --quality VERYLOW
 	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/light sample_scenes/normal/light_crf26 --quality LOW
 	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/rose720 sample_scenes/normal/rose720_crf20 --quality HIGH
+	$(PY) sample_scenes/reencode_clip.py sample_scenes/normal/umber600 sample_scenes/normal/umber600_crf23 --quality MEDIUM
 
