@@ -43,8 +43,8 @@ skin's, are dots whose colour fell *between the classes* (``Detections.between``
 to small dots (stop 41: 0.0-1.1 % as many as the kept blobs on the rendered clips, 2.4-9.0 % on clips
 re-encoded until they lost 7-54 points of their seen marker-frames): it pulls the dot's colour towards the
 skin's, so the blob's own hue drifts, but the hue of its colour *less the skin's* (:func:`difference_hue`)
-still points to its paint -- the right class for every such blob on a dot in four clips (stop 42), against
-72-90 % for the blob's own hue. They are returned with that class and flagged; whether a take keeps them is
+still points to its paint -- the right class for every such blob on a dot in six clips (stops 41 and 42),
+against 72-90 % for the blob's own hue. They are returned with that class and flagged; whether a take keeps them is
 :class:`.detect.DetectionStream`'s decision (``ExtractionSettings.washed_out``).
 
 The output is the UV extractor's :class:`~.detections.Detections` (``intensity`` is the blob's
