@@ -505,6 +505,15 @@ def test_a_take_whose_dots_colours_are_washed_out_says_so(tmp_path, capsys):
     code, out, err = _run(["detect", clip / "clip.mp4", "--light", "normal", "--rig", clip / "rig.json",
                            "-o", tmp_path / "d.csv"], capsys)
     assert code == 0 and "warning: 3.6 % as many blobs as the dots found had a colour between" in out + err
+    # stop 42: DETECTIONS.csv holds what a take would use -- the washed-out dots too, where they are kept
+    for setting, kept in (("auto", True), ("drop", False)):
+        csv = tmp_path / f"d_{setting}.csv"
+        code, _, err = _run(["detect", clip / "clip.mp4", "--light", "normal", "--rig", clip / "rig.json", "-q",
+                             "--washed-out", setting, "-o", csv], capsys)
+        figures = json.loads(csv.with_suffix(".json").read_text())
+        rows = len(csv.read_text().splitlines()) - 1
+        assert code == 0 and figures["between_classes"]["kept"] is kept, err
+        assert rows == figures["between_classes"]["blobs"] + kept * figures["between_classes"]["between_classes"]
 
 
 def test_washed_out_dots_are_classed_by_their_colour_less_the_skins():
