@@ -179,14 +179,15 @@ def test_detect_markers_says_when_the_mirrors_dots_are_too_small():
     """#18, stop 40: Detect Markers on a frame of small540 (normal light, dots 2.5 px across; a take of it measures
     1 % of its dots) gives each view's typical dot and the small-dot warning of `mirrorcap detect`; on the light
     clip (5.5 px in the mirrors) the sizes and no warning. (Stop 42: small540's dots wash out between the colour
-    classes -- 22 % as many as the others on this frame -- and are kept, so mirror 0's typical dot reads 2.6 px,
-    not 2.8.)"""
+    classes -- 22 % as many as the others on this frame -- and are kept, so mirror 0's typical dot reads 2.6 px;
+    with the scene's Washed-out Dots set to Drop, 2.8 px as before.)"""
     outputs = {}
-    for name in ("small540", "light"):
-        res = _run([ROOT / "tests" / "blender" / "detect_one_frame.py", ROOT / "sample_scenes" / "normal" / name],
-                   timeout=300)
+    for name, option in (("small540", ()), ("light", ()), ("small540", ("drop",))):
+        res = _run([ROOT / "tests" / "blender" / "detect_one_frame.py", ROOT / "sample_scenes" / "normal" / name,
+                    *option], timeout=300)
         assert res.returncode == 0 and "RESULT ['FINISHED']" in res.stdout, res.stdout[-2000:] + res.stderr[-2000:]
-        outputs[name] = res.stdout
+        outputs[name + "".join(option)] = res.stdout
+    assert "dots 3.2, 2.8, 2.5 px across" in outputs["small540drop"]       # the scene's Washed-out Dots: Drop
     assert "dots 3.2, 2.6, 2.5 px across" in outputs["small540"]
     assert "Warning: the mirrors' dots measure 2.6 px in mirror0 and 2.5 px in mirror1" in outputs["small540"]
     assert " px across) shown as tracks" in outputs["light"] and "dots measure" not in outputs["light"]

@@ -1,7 +1,9 @@
 """Detect Markers on one frame of a normal-light clip, headless, in a factory-settings session; the
 operator's reports go to stdout (tests/test_addon.py reads them).
 
-    python tests/blender/detect_one_frame.py CLIP_DIR
+    python tests/blender/detect_one_frame.py CLIP_DIR [WASHED_OUT]
+
+``WASHED_OUT``: the scene's Washed-out Dots (auto, keep or drop; default its default, auto).
 """
 
 import sys
@@ -19,5 +21,7 @@ s.video = str(clip / "clip.mp4")
 s.camera = str(clip / "camera.json")
 s.rig = str(clip / "rig.json")
 s.light = "normal"
+if len(sys.argv) > 2:
+    s.washed_out = sys.argv[2]
 bpy.ops.mirrorcap.open_clip(filepath=s.video)
 print("RESULT", sorted(bpy.ops.mirrorcap.detect_markers(frame=0)))
