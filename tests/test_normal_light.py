@@ -583,6 +583,32 @@ def test_a_washed_out_take_keeps_its_dots_between_the_classes(tmp_path, capsys):
     assert report["between_classes"]["kept"] is False and light["seen_reported_fraction"] > 0.995
 
 
+def test_a_take_that_opens_without_a_face_decides_on_the_frames_that_show_it(tmp_path):
+    """#18, stop 42: a take decides its view layout and whether it keeps its washed-out dots from its first frames.
+    One that opens on 35 frames with no face (a slate, the performer stepping in) had nothing to decide from: with
+    no rig file it was refused ("no markers found in the first 30 frames"), and with one it dropped its washed-out
+    dots. Now the first 30 frames that show the face are pooled (at most 300 frames): 35 black frames before
+    40 frames of light_crf26 (3.6 % washed out) keep them, and the views split as on light_crf26 alone."""
+    from mirrorcap.core.capture.detect import DetectionStream
+    from mirrorcap.core.capture.rig import load_rig_views
+
+    clip = ROOT / "sample_scenes" / "normal" / "light_crf26"
+    frames = [frame for _, frame in open_source(clip / "clip.mp4").frames(0, 40, 1)]
+    folder = tmp_path / "take"
+    folder.mkdir()
+    for i, frame in enumerate([np.zeros_like(frames[0])] * 35 + frames):
+        cv2.imwrite(str(folder / f"f{i:03d}.png"), frame)
+    colours, settings = ColorClasses.default("normal"), ExtractionSettings(light="normal")
+    for layout in (load_rig_views(clip / "rig.json"), None):
+        stream = DetectionStream(open_source(folder), colours, settings, layout)
+        got = list(stream)
+        assert len(got) == 75 and stream.keep_between is True
+        assert sum(len(det) for _, det, _ in got[:35]) == 0 and all(len(det) > 100 for _, det, _ in got[35:])
+    alone = DetectionStream(open_source(clip / "clip.mp4"), colours, settings, None, 0, 40)
+    list(alone)
+    assert np.allclose(stream.layout.boundaries, alone.layout.boundaries, atol=3.0)
+
+
 def test_a_held_out_washed_out_take_keeps_its_labels(tmp_path, capsys):
     """#18, stop 42, held out: umber600 (960x600, a deep skin of sRGB 125,85,65, 180 dots of 3 mm 680 mm away,
     mirrors at 42 deg; rendered after the rule for washed-out dots was set) re-encoded at H.264 CRF 23 holds 7 %

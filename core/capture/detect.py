@@ -37,6 +37,11 @@ from .video import VideoSource
 
 DETECTION_COLUMNS = ("frame", "view", "x", "y", "color", "area", "intensity")
 LAYOUT_FRAMES = 30  # frames pooled to find the gaps between views
+#: ... that show the face -- at least FACE_DETECTIONS detections each -- up to DECISION_MAX_FRAMES frames: a take
+#: that opens on frames with no face (a slate, the performer stepping in) decides its layout and whether it keeps
+#: its washed-out dots (keeps_between) on the first frames that show it
+FACE_DETECTIONS = 10
+DECISION_MAX_FRAMES = 300
 
 
 def format_detection_rows(frame: int, view, x, y, color, area, intensity, view_names=VIEW_NAMES,
@@ -107,7 +112,8 @@ def _nothing_found_hint(settings: ExtractionSettings) -> str:
 
 class DetectionStream:
     """Detections of a source frame by frame, each assigned to its view: iterate to get
-    ``(frame_number, Detections, view (n,))``. The first ``LAYOUT_FRAMES`` frames' detections are
+    ``(frame_number, Detections, view (n,))``. The detections of the first ``LAYOUT_FRAMES`` frames that show
+    the face (``FACE_DETECTIONS`` or more; at most ``DECISION_MAX_FRAMES`` frames in all) are
     buffered -- detections, never images -- until three things are known from them: the view layout
     (a rig file's, or their gaps'), ``dot_px`` (a dot's diameter, :func:`dot_diameter_px`) and, under
     normal light, whether the dots whose colour fell between the classes are kept (``keep_between``;
@@ -133,7 +139,7 @@ class DetectionStream:
 
     def __iter__(self):
         extractor = marker_extractor(self.colors, self.settings)
-        pending = []
+        pending, with_face = [], 0
         for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
             t0 = time.perf_counter()
             det = extractor(frame)
@@ -146,7 +152,8 @@ class DetectionStream:
                 self.progress(self.processed)
             if self.keep_between is None:
                 pending.append((n, det))
-                if len(pending) >= min(LAYOUT_FRAMES, self.total):
+                with_face += len(det) >= FACE_DETECTIONS
+                if with_face >= min(LAYOUT_FRAMES, self.total) or len(pending) >= DECISION_MAX_FRAMES:
                     yield from self._first_frames(pending)
                     pending = []
             else:
