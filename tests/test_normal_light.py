@@ -583,12 +583,14 @@ def test_a_washed_out_take_keeps_its_dots_between_the_classes(tmp_path, capsys):
     assert report["between_classes"]["kept"] is False and light["seen_reported_fraction"] > 0.995
 
 
-def test_a_take_that_opens_without_a_face_decides_on_the_frames_that_show_it(tmp_path):
-    """#18, stop 42: a take decides its view layout and whether it keeps its washed-out dots from its first frames.
-    One that opens on 35 frames with no face (a slate, the performer stepping in) had nothing to decide from: with
-    no rig file it was refused ("no markers found in the first 30 frames"), and with one it dropped its washed-out
-    dots. Now the first 30 frames that show the face are pooled (at most 300 frames): 35 black frames before
-    40 frames of light_crf26 (3.6 % washed out) keep them, and the views split as on light_crf26 alone."""
+def test_a_take_that_opens_without_a_face_decides_on_the_frames_that_show_it(tmp_path, capsys):
+    """#18, stop 42: a take decides its view layout and whether it keeps its washed-out dots from its first frames,
+    and self-calibrates its mirrors and finds its markers on its first frames too. One that opens on 35 frames with
+    no face (a slate, the performer stepping in) had nothing to decide from: with no rig file `detect` and `track`
+    refused it ("no markers found in the first 30 frames"), with one `track` refused it at self-calibration.
+    Now the first 30 frames that show the face are pooled (at most 300 frames): 35 black frames before 40 frames of
+    light_crf26 (3.6 % washed out) keep them, the views split as on light_crf26 alone, and `track` leaves the 35
+    frames out with a warning and tracks the rest as light_crf26's own first 40 frames."""
     from mirrorcap.core.capture.detect import DetectionStream
     from mirrorcap.core.capture.rig import load_rig_views
 
@@ -607,6 +609,18 @@ def test_a_take_that_opens_without_a_face_decides_on_the_frames_that_show_it(tmp
     alone = DetectionStream(open_source(clip / "clip.mp4"), colours, settings, None, 0, 40)
     list(alone)
     assert np.allclose(stream.layout.boundaries, alone.layout.boundaries, atol=3.0)
+    scores = {}
+    for name, video in (("slate", folder), ("alone", clip / "clip.mp4")):
+        code, out, err = _run(["track", video, "--light", "normal", "--camera", clip / "camera.json", "--frames",
+                               "0:75" if name == "slate" else "0:40", "-o", tmp_path / f"{name}.c3d", "--report",
+                               tmp_path / f"{name}.json"], capsys)
+        assert code == 0, err
+        scores[name] = (*scored_take(clip, tmp_path / f"{name}.c3d", tmp_path / f"{name}.json"), out + err)
+    s, report, _, text = scores["slate"]
+    assert "warning: the first 35 frames (0 to 34) show no face" in text
+    assert report["frames"]["first"] == 35 and report["frames"]["count"] == 40
+    assert s["identity_switches"] == 0 and s["seen_reported_fraction"] > 0.9
+    assert s["seen_reported_fraction"] == scores["alone"][0]["seen_reported_fraction"]
 
 
 def test_a_held_out_washed_out_take_keeps_its_labels(tmp_path, capsys):

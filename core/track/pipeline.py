@@ -93,8 +93,10 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     designations in the first tracked frame (:func:`.seeds.read_seeds`). ``progress(frames_read)``
     is called per decoded frame, ``track_progress(frame, frames)`` per tracked frame;
     ``rigid`` names the markers that carry the head pose, as :func:`..capture.rig.rigid_selection` gives
-    them (``rigid_source`` says where they came from, for the report)."""
-    from ..capture.detect import DetectionStream, _check_camera, between_classes, between_classes_warning
+    them (``rigid_source`` says where they came from, for the report). Frames at the start that show no face
+    (fewer than :data:`..capture.detect.FACE_DETECTIONS` detections: a slate, an empty chair) are left out, with
+    a warning: the take starts at the first frame that shows it, its neutral frame."""
+    from ..capture.detect import FACE_DETECTIONS, DetectionStream, _check_camera, between_classes, between_classes_warning
 
     _check_camera(camera, source)
     extraction = extraction or ExtractionSettings()
@@ -105,6 +107,12 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     t_detect = time.perf_counter() - t0
     washed = between_classes(stream)
     log = log if log is not None else MessageLog()
+    shown = [len(f.direct) + len(f.mirror[0]) + len(f.mirror[1]) >= FACE_DETECTIONS for f in frames]
+    lead = shown.index(True) if True in shown else 0
+    if lead:          # a slate, an empty chair: the take starts where the face does (its neutral frame)
+        log.warning(f"the first {lead} frames ({numbers[0]} to {numbers[lead - 1]}) show no face (fewer than "
+                    f"{FACE_DETECTIONS} markers each): the take starts at frame {numbers[lead]}")
+        numbers, frames = numbers[lead:], frames[lead:]
     washed_out = between_classes_warning(extraction.light, washed)
     if washed_out:
         log.warning(washed_out)
