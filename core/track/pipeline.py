@@ -96,7 +96,8 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     them (``rigid_source`` says where they came from, for the report). Frames at the start that show no face
     (fewer than :data:`..capture.detect.FACE_DETECTIONS` detections: a slate, an empty chair) are left out, with
     a warning: the take starts at the first frame that shows it, its neutral frame."""
-    from ..capture.detect import FACE_DETECTIONS, DetectionStream, _check_camera, between_classes, between_classes_warning
+    from ..capture.detect import (FACE_DETECTIONS, DetectionStream, _check_camera, between_classes,
+                                  between_classes_warning)
 
     _check_camera(camera, source)
     extraction = extraction or ExtractionSettings()
