@@ -256,13 +256,13 @@ class ColorDotExtractor:
             hue_ok = from_skin >= FROM_SKIN_DEG
         dot_like = ((saturation >= s.min_saturation) & (sums[:, 3] >= s.min_area) & (elongation <= s.max_streak)
                     & (blob_contrast >= s.min_dot_contrast))
+        # dots between the classes (none while learning classes: any hue FROM_SKIN_DEG from the skin's passes),
+        # classed by the hue of their colour less the skin's (module text)
         between = dot_like & ~hue_ok & (from_skin >= BETWEEN_FROM_SKIN_DEG)
-        if s.max_hue_deg < 180.0 and between.any():   # classed by their colour less the skin's (module text)
+        if between.any():
             skin = sums[between, 11:14] / sums[between, :1]
             cls[between] = np.argmin(hue_apart(difference_hue(rgb[between], skin)[:, None], self._class_hues[None]),
                                      axis=1)
-        else:
-            between[:] = False
         keep = (hue_ok & dot_like) | between
         return Detections(x=cx[keep], y=cy[keep], color=cls[keep], area=sums[keep, 3].astype(int),
                           intensity=sums[keep, 4] / sums[keep, 3], rgb=rgb[keep], elongation=elongation[keep],

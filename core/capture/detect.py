@@ -120,7 +120,8 @@ class DetectionStream:
     ``ExtractionSettings.washed_out``: ``"auto"`` keeps them when they number more than
     :data:`BETWEEN_CLASSES_MAX_SHARE` of the other dots there, :func:`keeps_between`). ``extract_s``
     accumulates the extraction time and ``processed`` the frames read, ``blobs`` the detections
-    (between-class blobs not counted) and ``between_classes`` the between-class blobs, kept or not."""
+    (between-class blobs not counted) and ``between_classes`` the between-class blobs, kept or not;
+    ``first_face`` is the number of the first frame that shows the face (None while none has)."""
 
     def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
                  layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
@@ -135,6 +136,7 @@ class DetectionStream:
         self.blobs = 0               # detections of a colour class, and ...
         self.between_classes = 0     # ... blobs of a hue between the colour classes (normal light)
         self.keep_between = None     # are the latter kept? (decided after the first frames)
+        self.first_face = None       # the number of the first frame that shows the face (FACE_DETECTIONS or more)
         self.dot_px = settings.marker_diameter_px
 
     def __iter__(self):
@@ -150,29 +152,28 @@ class DetectionStream:
             self.between_classes += between
             if self.progress:
                 self.progress(self.processed)
+            shows_face = len(det) >= FACE_DETECTIONS
+            if shows_face and self.first_face is None:
+                self.first_face = n
             if self.keep_between is None:
                 pending.append((n, det))
-                with_face += len(det) >= FACE_DETECTIONS
+                with_face += shows_face
                 if with_face >= min(LAYOUT_FRAMES, self.total) or len(pending) >= DECISION_MAX_FRAMES:
                     yield from self._first_frames(pending)
                     pending = []
             else:
-                det = self._chosen(det)
+                det = between_chosen(det, self.keep_between)
                 yield n, det, self.layout.assign(det.x, det.y)
         if self.keep_between is None:
             if self.processed == 0:
                 raise InputError(f"no frame could be read from {self.source.path}")
             yield from self._first_frames(pending)
 
-    def _chosen(self, det):
-        """``det`` without its between-class blobs unless they are kept."""
-        return between_chosen(det, self.keep_between)
-
     def _first_frames(self, pending):
         """Decide from the buffered first frames ``pending`` (``(frame number, Detections)``) whether the
         between-class blobs are kept, a dot's diameter and the view layout; yield those frames."""
         self.keep_between = keeps_between(self.settings.washed_out, self.between_classes, self.blobs)
-        chosen = [(n, self._chosen(det)) for n, det in pending]
+        chosen = [(n, between_chosen(det, self.keep_between)) for n, det in pending]
         if self.dot_px is None:
             self.dot_px = dot_diameter_px(self.settings, [det for _, det in chosen])
         if self.layout is None:

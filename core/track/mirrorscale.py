@@ -216,7 +216,8 @@ def scale_link_warning(link: dict | None) -> str | None:
     if not few and link["relative_spread"] <= LINK_MAX_SPREAD:
         return None
     why = (f"only {link['markers']} marker(s) seen in both mirrors" if few else
-           f"the {link['markers']} markers seen in both mirrors disagree by {100 * link['relative_spread']:.1f} % "
+           f"the {link['markers']} markers seen in both mirrors, which disagree by "
+           f"{100 * link['relative_spread']:.1f} % "
            f"(up to {100 * LINK_MAX_SPREAD:.1f} % holds)")
     return (f"the two mirrors' scales rest on {why}, and the head's motion could not relate them either: depths "
             "through one mirror may be off by a few per cent against the other's. Give MIRRORS.json from "

@@ -108,8 +108,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
     t_detect = time.perf_counter() - t0
     washed = between_classes(stream)
     log = log if log is not None else MessageLog()
-    shown = [len(f.direct) + len(f.mirror[0]) + len(f.mirror[1]) >= FACE_DETECTIONS for f in frames]
-    lead = shown.index(True) if True in shown else 0
+    lead = numbers.index(stream.first_face) if stream.first_face is not None else 0
     if lead:          # a slate, an empty chair: the take starts where the face does (its neutral frame)
         log.warning(f"the first {lead} frames ({numbers[0]} to {numbers[lead - 1]}) show no face (fewer than "
                     f"{FACE_DETECTIONS} markers each): the take starts at frame {numbers[lead]}")
