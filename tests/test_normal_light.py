@@ -541,6 +541,19 @@ def test_washed_out_dots_are_classed_by_their_colour_less_the_skins():
     assert own_missed >= 6        # what the blob's own hue does with them: out of every class, or another's
 
 
+def test_the_per_pixel_hue_is_the_colours_hue_to_the_bit():
+    """Stop 43: the extractor's per-pixel hue (step 2) is computed from three channel columns
+    (:func:`colordots.hue_of_channels`) instead of an ``(n, 3)`` array: the same angles to the bit as
+    :func:`colordots.hue_saturation`, black pixels and float32 pixels included, so a pixel on the edge of the
+    15 deg test falls on the same side."""
+    from mirrorcap.core.capture.colordots import hue_of_channels, hue_saturation
+
+    rng = np.random.default_rng(7)
+    bgr = np.r_[rng.integers(0, 256, (20000, 3)), [[0, 0, 0], [0, 0, 255], [7, 7, 7]]].astype(np.float32)
+    rgb = bgr[:, ::-1]
+    assert np.array_equal(hue_of_channels(bgr[:, 2], bgr[:, 1], bgr[:, 0]), hue_saturation(rgb)[0])
+
+
 @pytest.mark.parametrize("setting, share, kept", [("auto", 0.021, True), ("auto", 0.019, False), ("keep", 0.0, True),
                                                   ("drop", 0.5, False)])
 def test_which_takes_keep_the_washed_out_dots(setting, share, kept):

@@ -129,3 +129,85 @@ def test_every_command_of_the_command_line_runs_on_one_blas_thread(monkeypatch, 
         monkeypatch.setenv(BLAS_THREADS_ENV, "many")
         assert main(["info", str(tmp_path / "take.c3d")]) == 2
     assert seen == [[1]]
+
+
+def test_the_detection_thread_count_is_the_users_to_set(monkeypatch):
+    """Under normal light detection extracts one frame per core (at most four), under UV light one frame at a time
+    (measured: no faster); ``MIRRORCAP_DETECT_THREADS`` sets another count under either; anything but a whole
+    number of at least 1 is refused with the variable's name."""
+    import os
+
+    from mirrorcap.core.common.threads import DETECT_THREADS_ENV, MAX_DETECTION_THREADS, detection_threads
+
+    monkeypatch.delenv(DETECT_THREADS_ENV, raising=False)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert detection_threads() == max(1, min(cores, MAX_DETECTION_THREADS))
+    assert detection_threads(extraction_bound=False) == 1
+    monkeypatch.setenv(DETECT_THREADS_ENV, "3")
+    assert detection_threads() == 3 and detection_threads(extraction_bound=False) == 3
+    for bad in ("0", "-2", "two", "1.5"):
+        monkeypatch.setenv(DETECT_THREADS_ENV, bad)
+        with pytest.raises(InputError, match=DETECT_THREADS_ENV):
+            detection_threads()
+
+
+def test_frames_extracted_on_threads_give_the_same_detections_in_order(monkeypatch):
+    """Stop 43: under normal light frames are extracted on several threads at once. Each thread keeps its own
+    extractor (they hold per-frame buffers), so 40 frames of the light clip give, frame by frame, the detections of
+    one extractor alone, in the frames' order, on 1, 2 and 3 threads; the stream's counts agree too."""
+    from pathlib import Path
+
+    from mirrorcap.core.capture.detect import DetectionStream
+    from mirrorcap.core.capture.markers import ColorClasses, ExtractionSettings
+    from mirrorcap.core.capture.rig import load_rig_views
+    from mirrorcap.core.capture.video import open_source
+
+    clip = Path(__file__).resolve().parents[1] / "sample_scenes" / "normal" / "light"
+    colours, settings = ColorClasses.default("normal"), ExtractionSettings(light="normal")
+    runs = {}
+    for threads in (1, 2, 3):
+        stream = DetectionStream(open_source(clip / "clip.mp4"), colours, settings, load_rig_views(clip / "rig.json"),
+                                 0, 40, threads=threads)
+        assert stream.threads == threads
+        runs[threads] = ([(n, det, view) for n, det, view in stream], stream.processed, stream.blobs)
+    serial, processed, blobs = runs[1]
+    assert processed == 40 and blobs > 40 * 100 and [n for n, _, _ in serial] == list(range(40))
+    for threads in (2, 3):
+        got, got_processed, got_blobs = runs[threads]
+        assert (got_processed, got_blobs) == (processed, blobs)
+        assert [n for n, _, _ in got] == list(range(40))
+        for (_, a, view_a), (_, b, view_b) in zip(serial, got):
+            assert np.array_equal(view_a, view_b)
+            for field in ("x", "y", "color", "area", "intensity", "rgb", "elongation", "between"):
+                assert np.array_equal(getattr(a, field), getattr(b, field)), field
+
+
+def test_threaded_extraction_raises_in_the_frames_turn_and_stops_cleanly():
+    """A frame the extractor refuses raises its error where that frame's turn comes, after the frames before it;
+    a consumer that stops early leaves no extraction thread behind."""
+    import threading
+
+    from mirrorcap.core.capture.detect import extracted
+
+    calls = []
+
+    def make_extractor():
+        def extract(frame):
+            calls.append(frame)
+            if frame < 0:
+                raise InputError(f"frame {frame} refused")
+            return frame * 10
+        return extract
+
+    frames = [(n, n if n != 5 else -5) for n in range(12)]
+    got = []
+    with pytest.raises(InputError, match="frame -5 refused"):
+        for n, det, seconds in extracted(iter(frames), make_extractor, threads=2):
+            got.append((n, det))
+            assert seconds >= 0.0
+    assert got == [(n, 10 * n) for n in range(5)]
+    stream = extracted(iter([(n, n) for n in range(1000)]), make_extractor, threads=3)
+    assert [next(stream)[:2] for _ in range(3)] == [(0, 0), (1, 10), (2, 20)]
+    stream.close()
+    assert len(calls) < 100                                  # at most twice the threads' frames ran ahead
+    assert not [t for t in threading.enumerate() if t.name.startswith("mirrorcap-extract")]

@@ -88,6 +88,17 @@ def hue_saturation(rgb) -> tuple:
     return np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b), 1.0 - 3.0 * np.minimum(np.minimum(r, g), b)
 
 
+def hue_of_channels(r, g, b) -> np.ndarray:
+    """:func:`hue_saturation`'s hue of colours given as three channel columns ``(n,)`` each (any float dtype;
+    computed in float64 with the same operations, so the same angles to the bit), without forming an
+    ``(n, 3)`` array: the per-pixel form of the extractor's step 2."""
+    r, g, b = (np.asarray(c, dtype=float) for c in (r, g, b))
+    s = r + g + b
+    s = np.where(s > 0, s, 1.0)
+    r, g, b = r / s, g / s, b / s
+    return np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b)
+
+
 def hue_apart(hue_a, hue_b) -> np.ndarray:
     """The angle (radians, 0 to pi) between hue angles ``hue_a`` and ``hue_b`` (broadcast), across the
     wrap at +-pi."""
@@ -148,13 +159,15 @@ def split_by_colour(lab, n_blobs: int, hue, xs, ys, weight, class_hues, settings
     rim = strong & ~is_first & (share < SPLIT_SHARE) & (dist < SPLIT_FAR_PX)
     piece = np.where(own & strong[lab, cls], cls, first[lab])
     key = lab.astype(np.int64) * n_classes + np.where(mixed[lab], piece, 0)
-    uniq, new = np.unique(key, return_inverse=True)
+    present = np.zeros(size, bool)
+    present[key] = True
+    new = (np.cumsum(present) - 1)[key]          # the keys numbered in order, as np.unique's inverse, in O(n)
     # in a split blob a pixel weighs by how near its hue is to its piece's class: where the dots meet, their
     # colours blend to a hue of neither, and that seam would pull both centres towards it
     near = 1.0 - apart[np.arange(piece.size), piece] / np.radians(settings.max_hue_deg)
     weight = np.where(mixed[lab], weight * np.clip(near, 0.0, 1.0), weight)
     weight = np.where(mixed[lab] & rim[lab, piece], 0.0, weight)
-    return new.astype(lab.dtype), uniq.size, weight
+    return new.astype(lab.dtype), int(present.sum()), weight
 
 
 class ColorDotExtractor:
@@ -191,9 +204,8 @@ class ColorDotExtractor:
         s = self.settings
         bg = self._background(frame_bgr)
         diff = cv2.absdiff(cv2.blur(frame_bgr, (3, 3)), bg)        # 3x3: sensor noise is no dot
-        total = cv2.transform(diff, self._ones)                     # sum over the channels, saturating
-        idx = np.flatnonzero(total > s.min_difference)              # a superset of ...
-        idx = idx[diff.reshape(-1, 3).take(idx, axis=0).max(axis=1) > s.min_difference]   # ... some channel over
+        b_diff, g_diff, r_diff = cv2.split(diff)
+        idx = np.flatnonzero(cv2.max(cv2.max(b_diff, g_diff), r_diff) > s.min_difference)   # some channel over
         px = frame_bgr.reshape(-1, 3).take(idx, axis=0).astype(np.float32)
         pb = bg.reshape(-1, 3).take(idx, axis=0).astype(np.float32)
         b, g, r = px[:, 0], px[:, 1], px[:, 2]
@@ -203,15 +215,16 @@ class ColorDotExtractor:
         d0, d1, d2 = b / s_px - bb / s_bg, g / s_px - bg_g / s_bg, r / s_px - br / s_bg
         contrast = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         value = np.maximum(np.maximum(b, g), r)
-        ok = ((contrast > s.min_contrast) & (value >= s.min_value)
-              & (value >= s.min_value_ratio * np.maximum(np.maximum(bb, bg_g), br)))
+        ok = np.flatnonzero((contrast > s.min_contrast) & (value >= s.min_value)
+                            & (value >= s.min_value_ratio * np.maximum(np.maximum(bb, bg_g), br)))
+        idx, contrast, value, px, pb = idx[ok], contrast[ok], value[ok], px[ok], pb[ok]
         # ... and a hue of its own: shading of the skin (the jaw's shadow, a crease) keeps the skin's hue, and
         # joined to a dot beside it pulled the blob's centre 8 px off (full HD: a blue dot at the jaw line
         # never tracked). Below twice min_value a pixel's hue is noise: there the test is left out (a dark
         # region cut into its noisy pieces gave the light clip a false dot at a view boundary)
-        hue = hue_saturation(px[:, ::-1])[0]
-        from_skin = np.degrees(hue_apart(hue, hue_saturation(pb[:, ::-1])[0]))
-        ok &= (from_skin >= FROM_SKIN_DEG) | (value < 2.0 * s.min_value)
+        hue = hue_of_channels(px[:, 2], px[:, 1], px[:, 0])
+        from_skin = np.degrees(hue_apart(hue, hue_of_channels(pb[:, 2], pb[:, 1], pb[:, 0])))
+        ok = (from_skin >= FROM_SKIN_DEG) | (value < 2.0 * s.min_value)
         return idx[ok], contrast[ok], value[ok], px[ok], pb[ok], hue[ok]
 
     def __call__(self, frame_bgr: np.ndarray):

@@ -28,7 +28,7 @@ import numpy as np
 from ..common.errors import InputError
 from ..common.files import default_file_mode, write_files_atomically
 from ..common.log import FrameProgress
-from ..common.threads import with_limited_threads
+from ..common.threads import detection_threads, with_limited_threads
 from ..geometry.camera import Camera
 from .detections import MAX_DOT_PX, typical_dot_diameter_px
 from .markers import ColorClasses, ExtractionSettings, marker_extractor
@@ -118,16 +118,20 @@ class DetectionStream:
     (a rig file's, or their gaps'), ``dot_px`` (a dot's diameter, :func:`dot_diameter_px`) and, under
     normal light, whether the dots whose colour fell between the classes are kept (``keep_between``;
     ``ExtractionSettings.washed_out``: ``"auto"`` keeps them when they number more than
-    :data:`BETWEEN_CLASSES_MAX_SHARE` of the other dots there, :func:`keeps_between`). ``extract_s``
-    accumulates the extraction time and ``processed`` the frames read, ``blobs`` the detections
-    (between-class blobs not counted) and ``between_classes`` the between-class blobs, kept or not;
-    ``first_face`` is the number of the first frame that shows the face (None while none has)."""
+    :data:`BETWEEN_CLASSES_MAX_SHARE` of the other dots there, :func:`keeps_between`). Frames are extracted
+    ``threads`` at once (:func:`extracted`; by default :func:`..common.threads.detection_threads`: under normal light
+    one per core, under UV light one), with the same detections as one after the other. ``extract_s`` accumulates
+    the extraction time (summed over the threads) and ``processed`` the frames read, ``blobs`` the detections
+    (between-class blobs not counted) and ``between_classes`` the between-class blobs, kept or not; ``first_face``
+    is the number of the first frame that shows the face (None while none has)."""
 
     def __init__(self, source: VideoSource, colors: ColorClasses, settings: ExtractionSettings,
                  layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
-                 progress=None):
+                 progress=None, threads: int | None = None):
         self.source, self.colors, self.settings, self.layout = source, colors, settings, layout
         self.start, self.end, self.step = start, end, step
+        self.threads = detection_threads(extraction_bound=settings.light == "normal") if threads is None \
+            else max(int(threads), 1)
         end_eff = source.frame_count if end is None else min(end, source.frame_count)
         self.total = len(range(start, end_eff, step))
         self.progress = progress
@@ -140,12 +144,10 @@ class DetectionStream:
         self.dot_px = settings.marker_diameter_px
 
     def __iter__(self):
-        extractor = marker_extractor(self.colors, self.settings)
         pending, with_face = [], 0
-        for n, frame in self.source.frames(self.start, self.end, self.step, prefetch=4):
-            t0 = time.perf_counter()
-            det = extractor(frame)
-            self.extract_s += time.perf_counter() - t0
+        frames = self.source.frames(self.start, self.end, self.step, prefetch=4)
+        for n, det, seconds in extracted(frames, lambda: marker_extractor(self.colors, self.settings), self.threads):
+            self.extract_s += seconds
             self.processed += 1
             between = det.between_count()
             self.blobs += len(det) - between
@@ -180,6 +182,51 @@ class DetectionStream:
             self.layout = _layout_from(chosen, self.settings, self.source)
         for n, det in chosen:
             yield n, det, self.layout.assign(det.x, det.y)
+
+
+def extracted(frames, make_extractor, threads: int = 1):
+    """``(frame number, Detections, seconds)`` for each ``(frame number, BGR image)`` of ``frames``, in their
+    order: the frame's markers and its extraction time. ``threads`` > 1 extracts that many frames at once, each
+    thread with an extractor of its own (``make_extractor()``; an extractor keeps per-frame buffers), at most
+    twice as many frames in flight (memory stays bounded). Each frame's detections are those of one extractor
+    alone; an extraction's error is raised here, in the frame's turn; stopping early cancels the frames not yet
+    begun and waits for those begun."""
+    if threads <= 1:
+        extractor = make_extractor()
+        for n, frame in frames:
+            t0 = time.perf_counter()
+            det = extractor(frame)
+            yield n, det, time.perf_counter() - t0
+        return
+    import threading
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    own = threading.local()
+
+    def extract(frame):
+        extractor = getattr(own, "extractor", None)
+        if extractor is None:
+            extractor = own.extractor = make_extractor()
+        t0 = time.perf_counter()
+        det = extractor(frame)
+        return det, time.perf_counter() - t0
+
+    pool = ThreadPoolExecutor(threads, thread_name_prefix="mirrorcap-extract")
+    in_flight = deque()
+    try:
+        for n, frame in frames:
+            in_flight.append((n, pool.submit(extract, frame)))
+            if len(in_flight) >= 2 * threads:
+                n, job = in_flight.popleft()
+                yield n, *job.result()
+        while in_flight:
+            n, job = in_flight.popleft()
+            yield n, *job.result()
+    finally:
+        for _, job in in_flight:
+            job.cancel()
+        pool.shutdown(wait=True)
 
 
 def between_chosen(det, keep: bool):
@@ -266,8 +313,8 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
             "dot_px": dot_px_by_view(np.concatenate(areas), np.concatenate(area_views)),
             "video": source.compression(),
             "between_classes": between_classes(stream),
-            "timings_s": {"total": elapsed, "extract": t_extract, "write": t_write,
-                          "decode_and_other": elapsed - t_extract - t_write},
+            "timings_s": {"total": elapsed, "extract": t_extract, "write": t_write},
+            "extract_threads": stream.threads,
             "frames_per_second": done / elapsed if elapsed > 0 else None,
         }
         write_files_atomically({output.with_suffix(".json"): json.dumps(report, indent=2) + "\n"})
