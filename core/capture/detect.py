@@ -218,11 +218,11 @@ def extracted(frames, make_extractor, threads: int = 1):
         for n, frame in frames:
             in_flight.append((n, pool.submit(extract, frame)))
             if len(in_flight) >= 2 * threads:
-                n, job = in_flight.popleft()
-                yield n, *job.result()
+                oldest, job = in_flight.popleft()
+                yield oldest, *job.result()
         while in_flight:
-            n, job = in_flight.popleft()
-            yield n, *job.result()
+            oldest, job = in_flight.popleft()
+            yield oldest, *job.result()
     finally:
         for _, job in in_flight:
             job.cancel()

@@ -40,7 +40,7 @@ from .errors import InputError
 BLAS_THREADS_ENV = "MIRRORCAP_BLAS_THREADS"
 DEFAULT_BLAS_THREADS = 1
 DETECT_THREADS_ENV = "MIRRORCAP_DETECT_THREADS"
-MAX_DETECTION_THREADS = 4   # beyond this the video's decoder, on its own threads, keeps the extraction waiting
+MAX_DETECTION_THREADS = 4   # a cap (measured on 2 cores only: with more, the video's decoder may be the bound)
 
 
 def detection_threads(extraction_bound: bool = True) -> int:
