@@ -12,10 +12,11 @@ import os
 import tempfile
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
-from mirrorcap.core.capture.markers import ColorClasses, ExtractionSettings, MarkerExtractor
+from mirrorcap.core.capture.markers import ColorClasses, ExtractionSettings, MarkerExtractor, marker_extractor
 from mirrorcap.core.capture.rig import split_views_by_gaps
 from mirrorcap.synthetic.render import RenderSettings, match_detections, render_rig_frame, rig_clip_frames
 from mirrorcap.synthetic.simulate import face_rig
@@ -146,4 +147,53 @@ def run_extraction_benchmark(stream_frames: int = 10000, progress=print) -> dict
     progress(f"  decode alone: {out['decode_ms_per_frame']:.2f} ms/frame; whole detect on a {stream_frames}-frame "
              f"MP4: {s['frames_per_s']:.0f} frames/s; RSS {s['rss_mb_at_10_50_100_percent']} MB "
              f"(growth after warm-up {s['rss_growth_mb_after_first_10_percent']:.1f} MB)")
+    out["normal_light"] = run_normal_light_detection_benchmark(progress=progress)
+    return out
+
+
+NORMAL_LIGHT_CLIP = Path(__file__).resolve().parents[1] / "sample_scenes" / "normal" / "light"
+
+
+def run_normal_light_detection_benchmark(repeats: int = 3, progress=print) -> dict:
+    """Normal-light detection on the light clip (1280x720 H.264, 120 frames, `make normal-clips`): extraction alone
+    on one core (its first 40 frames held in memory, median of ``repeats`` passes), and the whole ``detect`` (decode,
+    extraction, CSV) frame after frame and on ``detection_threads()`` threads (fastest of ``repeats``)."""
+    import cv2
+
+    from mirrorcap.core.capture.detect import run_detection
+    from mirrorcap.core.capture.video import open_source
+    from mirrorcap.core.common.threads import DETECT_THREADS_ENV, detection_threads
+
+    source = open_source(NORMAL_LIGHT_CLIP / "clip.mp4")
+    settings = ExtractionSettings(light="normal")
+    colours = ColorClasses.default("normal")
+    cv2.setNumThreads(1)
+    frames = [img for _, img in source.frames(0, 40)]
+    ex = marker_extractor(colours, settings)
+    for img in frames[:3]:
+        ex(img)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for img in frames:
+            ex(img)
+        times.append((time.perf_counter() - t0) / len(frames))
+    out = {"clip": "sample_scenes/normal/light", "frames": source.frame_count,
+           "extract_ms_per_frame": float(np.median(times) * 1e3), "threads": detection_threads()}
+    saved = os.environ.get(DETECT_THREADS_ENV)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            for key, threads in (("detect_frames_per_s_one_thread", 1), ("detect_frames_per_s", out["threads"])):
+                os.environ[DETECT_THREADS_ENV] = str(threads)
+                best = min(run_detection(source, os.path.join(tmp, "det.csv"), colors=colours,
+                                         settings=settings)["timings_s"]["total"] for _ in range(repeats))
+                out[key] = source.frame_count / best
+    finally:
+        if saved is None:
+            os.environ.pop(DETECT_THREADS_ENV, None)
+        else:
+            os.environ[DETECT_THREADS_ENV] = saved
+    progress(f"  normal light (light clip): extraction alone {out['extract_ms_per_frame']:.1f} ms/frame on one core; "
+             f"whole detect {out['detect_frames_per_s_one_thread']:.0f} frames/s frame after frame, "
+             f"{out['detect_frames_per_s']:.0f} frames/s on {out['threads']} threads")
     return out
