@@ -373,14 +373,16 @@ def between_classes_warning(light: str, figures: dict) -> str | None:
 class AreaHistogram:
     """Blob areas (whole pixels) pooled by view over a stream, for each view's typical dot: its memory is the largest
     blob's area, not the stream's length (kept as lists, a 10,000-frame UV stream of 557 dots a frame grew the
-    process by 164 MB). ``add`` a frame's areas and views (indices into :data:`.rig.VIEW_NAMES`)."""
+    process by 164 MB). ``add`` a frame's areas and views (indices into :data:`.rig.VIEW_NAMES`; a blob outside
+    every view, -1, is left out)."""
 
     def __init__(self):
         self.counts = np.zeros((len(VIEW_NAMES), 0), np.int64)
 
     def add(self, area, view) -> None:
-        area = np.maximum(np.asarray(area, np.int64), 0)
         view = np.asarray(view, np.int64)
+        inside = (view >= 0) & (view < len(VIEW_NAMES))
+        area, view = np.maximum(np.asarray(area, np.int64)[inside], 0), view[inside]
         if not area.size:
             return
         size = max(self.counts.shape[1], int(area.max()) + 1)
