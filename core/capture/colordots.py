@@ -79,24 +79,31 @@ SPLIT_FAR_PX = 3.0
 BETWEEN_FROM_SKIN_DEG = 60.0
 
 
+def hue_angle(r, g, b) -> np.ndarray:
+    """The hue angle (radians) of a colour direction given as channel columns ``(n,)``: its angle about the grey
+    axis, ``atan2(sqrt(3) (g - b), 2 r - g - b)`` (any positive scale of ``r, g, b`` gives the same angle)."""
+    return np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b)
+
+
+def _normalised(r, g, b) -> tuple:
+    """Channel columns scaled to sum 1 (a black colour left as it is)."""
+    s = r + g + b
+    s = np.where(s > 0, s, 1.0)
+    return r / s, g / s, b / s
+
+
 def hue_saturation(rgb) -> tuple:
     """Hue angle (radians) and saturation ``1 - 3 min`` of colours ``(n, 3)`` after normalising
     them to sum 1."""
     rgb = np.asarray(rgb, dtype=float).reshape(-1, 3)
-    s = rgb.sum(axis=1, keepdims=True)
-    r, g, b = (rgb / np.where(s > 0, s, 1.0)).T
-    return np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b), 1.0 - 3.0 * np.minimum(np.minimum(r, g), b)
+    r, g, b = _normalised(rgb[:, 0], rgb[:, 1], rgb[:, 2])
+    return hue_angle(r, g, b), 1.0 - 3.0 * np.minimum(np.minimum(r, g), b)
 
 
 def hue_of_channels(r, g, b) -> np.ndarray:
-    """:func:`hue_saturation`'s hue of colours given as three channel columns ``(n,)`` each (any float dtype;
-    computed in float64 with the same operations, so the same angles to the bit), without forming an
-    ``(n, 3)`` array: the per-pixel form of the extractor's step 2."""
-    r, g, b = (np.asarray(c, dtype=float) for c in (r, g, b))
-    s = r + g + b
-    s = np.where(s > 0, s, 1.0)
-    r, g, b = r / s, g / s, b / s
-    return np.arctan2(np.sqrt(3.0) * (g - b), 2.0 * r - g - b)
+    """:func:`hue_saturation`'s hue of colours given as three channel columns ``(n,)`` each (any float dtype,
+    computed in float64), without forming an ``(n, 3)`` array: the per-pixel form of the extractor's step 2."""
+    return hue_angle(*_normalised(*(np.asarray(c, dtype=float) for c in (r, g, b))))
 
 
 def hue_apart(hue_a, hue_b) -> np.ndarray:
@@ -112,7 +119,7 @@ def difference_hue(rgb, skin_rgb) -> np.ndarray:
     colour's direction from grey. A dot blended with the skin around it -- video compression, a small or
     grazing image -- moves along that direction, so its difference keeps the paint's hue."""
     d = np.asarray(rgb, float).reshape(-1, 3) - np.asarray(skin_rgb, float).reshape(-1, 3)
-    return np.arctan2(np.sqrt(3.0) * (d[:, 1] - d[:, 2]), 2.0 * d[:, 0] - d[:, 1] - d[:, 2])
+    return hue_angle(d[:, 0], d[:, 1], d[:, 2])
 
 
 def split_by_colour(lab, n_blobs: int, hue, xs, ys, weight, class_hues, settings) -> tuple:
@@ -179,7 +186,6 @@ class ColorDotExtractor:
 
         self.colors, self.settings = colors, settings
         self._mask = None
-        self._ones = np.ones((1, 3), np.float32)
         self._class_hues = colors.hue_centres()
         self._cv2 = cv2
 

@@ -30,7 +30,7 @@ from ..common.files import default_file_mode, write_files_atomically
 from ..common.log import FrameProgress
 from ..common.threads import detection_threads, with_limited_threads
 from ..geometry.camera import Camera
-from .detections import MAX_DOT_PX, typical_dot_diameter_px
+from .detections import MAX_DOT_PX, disc_diameter_px, typical_dot_diameter_px
 from .markers import ColorClasses, ExtractionSettings, marker_extractor
 from .rig import VIEW_NAMES, ViewLayout, XHistogram, check_view_boundaries, split_views_by_gaps
 from .video import VideoSource
@@ -283,7 +283,7 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
                 counts[-1] += np.count_nonzero(view < 0)
                 xs.add(det.x)
                 ok = view >= 0
-                areas.add(det.area[ok], view[ok])
+                areas.add(det.area, view)
                 t0 = time.perf_counter()
                 fh.write(format_detection_rows(n, view[ok], det.x[ok], det.y[ok], det.color[ok], det.area[ok],
                                                det.intensity[ok], color_names=colors.names))
@@ -401,7 +401,7 @@ class AreaHistogram:
                 out[name] = None
                 continue
             ranked = np.searchsorted(cum, [(n - 1) // 2, n // 2], side="right")      # the middle value(s), sorted
-            out[name] = float(2.0 * np.sqrt(float(ranked.mean()) / np.pi)) or None
+            out[name] = disc_diameter_px(ranked.mean()) or None
         return out
 
 

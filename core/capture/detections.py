@@ -45,10 +45,15 @@ MAX_DOT_PX = 6.0  # a dot's diameter when ExtractionSettings.marker_diameter_px 
 # the typical dot may set it to: fragments of one marker lie within a dot of each other, at most this far
 
 
+def disc_diameter_px(area) -> float:
+    """The diameter (pixels) of a disc of ``area`` pixels."""
+    return float(2.0 * np.sqrt(area / np.pi))
+
+
 def typical_dot_diameter_px(areas) -> float:
     """The diameter of a disc of the median blob area (pixels): a frame's typical dot. 0 without blobs."""
     areas = np.asarray(areas, float)
-    return float(2.0 * np.sqrt(np.median(areas) / np.pi)) if areas.size else 0.0
+    return disc_diameter_px(np.median(areas)) if areas.size else 0.0
 
 
 def merge_fragments(sums, cls, radius_px: float):
