@@ -41,6 +41,7 @@ import sys
 
 from ..core import __version__
 from ..core.common.errors import MirrorCapError
+from ..core.common.files import check_output_paths
 from ..core.common.threads import limited_threads
 from . import commands
 
@@ -346,6 +347,8 @@ def main(argv=None) -> int:
     if getattr(args, "threshold", 1.0) <= 0:
         parser.error("--threshold must be positive")
     try:
+        # an output that could not be written is refused before the work, not after it
+        check_output_paths(*(getattr(args, name, None) for name in ("output", "report", "csv")))
         with limited_threads():     # one BLAS and one OpenCV thread (core/common/threads.py): tiny solves stall on more
             return args.func(args)
     except MirrorCapError as exc:

@@ -251,6 +251,8 @@ def test_detect_bad_input(clip, capsys, tmp_path):
         ([root / "clip.mp4", "--threshold", "300"], "threshold"),
         ([root / "clip.mp4", "--frames", "100:200"], "selects no frame"),
         ([root / "clip.mp4", "--rig", tmp_path / "bad.json"], "not valid JSON"),
+        ([root / "clip.mp4", "--step", "0"], "frame step"),
+        ([root / "clip.mp4", "--fps", "-30"], "frame rate"),
     ]
     for args, message in cases:
         code, _, err = _run(["detect", *args, "-o", out, "-q"], capsys)
@@ -258,6 +260,12 @@ def test_detect_bad_input(clip, capsys, tmp_path):
         lines = err.strip().splitlines()
         assert len(lines) == 1 and message in lines[0], (args, err)
         assert list(out.parent.iterdir()) == []  # nothing written, no temporary file left
+    # outputs that could not be written, or would overwrite each other: DETECTIONS.csv's report goes beside it
+    for output, message in [(out.parent, "is a folder"), (tmp_path / "missing" / "d.csv", "does not exist"),
+                            (out.with_suffix(".json"), "name the detections d.csv")]:
+        code, _, err = _run(["detect", root / "clip.mp4", "-o", output, "-q"], capsys)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, (output, err)
+        assert list(out.parent.iterdir()) == []
 
 
 def test_colors_learn_recovers_the_classes(clip, capsys, tmp_path):

@@ -129,6 +129,44 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
         assert list(out.parent.iterdir()) == []
 
 
+def test_track_refuses_bad_outputs_and_options_before_any_frame(rig_clip, capsys, tmp_path, monkeypatch):
+    """An output that could not be written, a frame step of 0, a frame rate of 0, a known length that is not
+    positive: one message before any frame is read (a long take would otherwise fail at its end, after minutes
+    of work), and nothing written."""
+    from mirrorcap.core.capture import video
+
+    root, _ = rig_clip
+    read = []
+    original = video.VideoSource.frames
+
+    def counted(self, *args, **kwargs):
+        for item in original(self, *args, **kwargs):
+            read.append(item[0])
+            yield item
+
+    monkeypatch.setattr(video.VideoSource, "frames", counted)
+    out = tmp_path / "out" / "take.c3d"
+    out.parent.mkdir()
+    clip = [root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json"]
+    cases = [
+        (["-o", tmp_path / "missing" / "take.c3d"], "output folder"),
+        (["-o", out, "--report", tmp_path / "missing" / "report.json"], "output folder"),
+        (["-o", out.parent], "is a folder"),
+        (["-o", out, "--report", out], "named for two outputs"),
+        (["-o", out, "--step", "0"], "frame step"),
+        (["-o", out, "--fps", "0"], "frame rate"),
+        (["-o", out, "--known-length", "m000", "m001", "-3"], "positive length"),
+    ]
+    for args, message in cases:
+        code, err = _run(["track", *clip, *args, "-q"], capsys)
+        assert code == 2, (args, err)
+        assert message in err and err.count("\n") == 1, (args, err)
+        assert read == [], (args, read)
+        assert list(out.parent.iterdir()) == []
+    code, err = _run(["track", *clip, "-o", out, "--frames", "0:3", "-q"], capsys)   # and the same run, well formed
+    assert code == 0 and read == [0, 1, 2] and out.is_file(), err
+
+
 def test_track_with_rigid_markers_named_in_the_rig_file(rig_clip, capsys, tmp_path):
     """A RIG.json with only "rigid" (the views split automatically): the markers imaged in
     the forehead box carry the head pose, and the report says so."""

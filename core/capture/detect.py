@@ -26,14 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from ..common.errors import InputError
-from ..common.files import default_file_mode, write_files_atomically
+from ..common.files import check_output_paths, default_file_mode, write_files_atomically
 from ..common.log import FrameProgress
 from ..common.threads import detection_threads, with_limited_threads
 from ..geometry.camera import Camera
 from .detections import MAX_DOT_PX, disc_diameter_px, typical_dot_diameter_px
 from .markers import ColorClasses, ExtractionSettings, marker_extractor
 from .rig import VIEW_NAMES, ViewLayout, XHistogram, check_view_boundaries, split_views_by_gaps
-from .video import VideoSource
+from .video import VideoSource, check_frame_step
 
 DETECTION_COLUMNS = ("frame", "view", "x", "y", "color", "area", "intensity")
 LAYOUT_FRAMES = 30  # frames pooled to find the gaps between views
@@ -129,6 +129,7 @@ class DetectionStream:
                  layout: ViewLayout | None = None, start: int = 0, end: int | None = None, step: int = 1,
                  progress=None, threads: int | None = None):
         self.source, self.colors, self.settings, self.layout = source, colors, settings, layout
+        check_frame_step(step)
         self.start, self.end, self.step = start, end, step
         self.threads = detection_threads(extraction_bound=settings.light == "normal") if threads is None \
             else max(int(threads), 1)
@@ -265,8 +266,10 @@ def run_detection(source: VideoSource, output, *, colors: ColorClasses | None = 
     colors = colors or ColorClasses.default(settings.light)
     _check_camera(camera, source)
     output = Path(output)
-    if not output.parent.is_dir():
-        raise InputError(f"output folder {output.parent} does not exist")
+    if output.suffix.lower() == ".json":
+        raise InputError(f"{output}: the detections are a CSV file, and their report is written beside it as "
+                         f"{output.stem}.json -- name the detections {output.stem}.csv")
+    check_output_paths(output, output.with_suffix(".json"))
     stream = DetectionStream(source, colors, settings, layout, start, end, step)
     stream.progress = FrameProgress(stream.total, "detect", progress or None)
     counts = np.zeros(len(VIEW_NAMES) + 1, dtype=np.int64)  # last: outside every view

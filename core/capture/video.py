@@ -95,8 +95,7 @@ class VideoSource:
         ``prefetch > 0`` decodes in a background thread, at most ``prefetch`` frames
         ahead (OpenCV releases the GIL while decoding, so decoding overlaps the
         caller's work on another core; memory stays bounded)."""
-        if step < 1:
-            raise InputError("frame step must be at least 1")
+        check_frame_step(step)
         end = self.frame_count if end is None else min(end, self.frame_count)
         if start >= end:
             raise InputError(f"frame range {start}:{end} selects no frame of {self.path} "
@@ -178,10 +177,18 @@ def _prefetched(iterator, depth: int):
         thread.join(timeout=5)
 
 
+def check_frame_step(step) -> None:
+    """Every ``step``-th frame: a whole number, at least 1 (one message wherever a step is taken)."""
+    if not (isinstance(step, (int, np.integer)) and step >= 1):
+        raise InputError(f"frame step must be a whole number, at least 1 (not {step!r})")
+
+
 def open_source(path, fps: float | None = None) -> VideoSource:
     """Open a video file, an image folder or a glob; clear errors for anything else."""
     import cv2
 
+    if fps is not None and not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
+        raise InputError(f"the frame rate must be a positive number of frames per second (not {fps!r})")
     text = str(path)
     p = Path(text)
     files = None

@@ -23,17 +23,38 @@ def default_file_mode() -> int:
     return 0o666 & ~umask
 
 
+def check_output_paths(*paths) -> None:
+    """Refuse, with one clear message, outputs that could not be written -- before any work is done, so that a long
+    take does not fail at its end: a folder that does not exist or cannot be written to, a path that is a folder,
+    one file named for two outputs. ``None`` entries (outputs not asked for) are skipped."""
+    named = {}
+    for path in paths:
+        if path is None:
+            continue
+        path = Path(path)
+        folder = path.parent if str(path.parent) else Path(".")
+        if not folder.is_dir():
+            raise InputError(f"output folder {folder} does not exist")
+        if path.is_dir():
+            raise InputError(f"output {path} is a folder: name the file to write")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise InputError(f"cannot write to output folder {folder}")
+        key = path.resolve()
+        if key in named:
+            raise InputError(f"{path} is named for two outputs: each needs a file of its own")
+        named[key] = path
+
+
 def write_files_atomically(contents: dict) -> None:
     """Write ``{path: str | bytes}`` so that either every file is replaced by its new
     content or (on any error) none is touched and no temporary file is left."""
+    check_output_paths(*contents)
     temps = []
     mode_bits = default_file_mode()
     try:
         for path, data in contents.items():
             path = Path(path)
             folder = path.parent if str(path.parent) else Path(".")
-            if not folder.is_dir():
-                raise InputError(f"output folder {folder} does not exist")
             fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
             temps.append((tmp, path))
             os.chmod(tmp, mode_bits)  # mkstemp creates 0600; give the file the usual umask-based mode

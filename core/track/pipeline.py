@@ -58,7 +58,7 @@ from ..capture.views import ClipDetections, FrameDets
 from ..capture.video import VideoSource
 from ..common.log import MessageLog
 from ..common.errors import DegenerateError, InputError
-from ..common.files import write_files_atomically
+from ..common.files import check_output_paths, write_files_atomically
 from ..common.threads import with_limited_threads
 from ..geometry.camera import Camera
 from ..geometry.mirror import MirrorPlane
@@ -100,6 +100,9 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                                   between_classes_warning)
 
     _check_camera(camera, source)
+    check_output_paths(output, report)
+    if known_length is not None and not known_length[2] > 0:
+        raise InputError(f"--known-length must be a positive length in millimetres (not {known_length[2]:g})")
     extraction = extraction or ExtractionSettings()
     t0 = time.perf_counter()
     stream = DetectionStream(source, colors or ColorClasses.default(extraction.light), extraction, layout,
@@ -120,6 +123,8 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
         else np.zeros(0)
     views = check_view_boundaries(xs, stream.layout, len(frames), stream.dot_px or 0.0) \
         if stream.layout is not None else None
+    # the clip's detections as flat arrays, once; the per-frame objects go (a long take's memory while it tracks)
+    frames = ClipDetections.from_frames(frames, camera)
     return track_detections(numbers, frames, camera, source.fps / step, output, report=report, mirrors=mirrors,
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
