@@ -121,7 +121,7 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
     from pathlib import Path
 
     from ..core.common.errors import InputError
-    from ..core.common.files import write_files_atomically
+    from ..core.common.files import output_folder, write_files_atomically
 
     bake = bake or _bake_one
     out_dir = Path(out_dir)
@@ -135,7 +135,7 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
         raise InputError(f"takes with the same name would overwrite each other's output: {', '.join(dup)}")
     if workers < 1:
         raise InputError("--workers must be at least 1")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_folder(out_dir)
     options = dict(options or {})
     jobs = [(str(t), str(head), str(out_dir), options) for t in takes]
     t0 = time.perf_counter()

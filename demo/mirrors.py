@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.common.errors import InputError
-from ..core.common.files import write_files_atomically
+from ..core.common.files import output_folder, write_files_atomically
 from ..core.geometry.camera import Camera, angle_deg
 from ..core.geometry.reconstruct import KnownLength, reconstruct_pairs
 from ..core.take.pairs import format_points, read_pairs, read_points
@@ -25,7 +25,7 @@ SAMPLE = Path(__file__).resolve().parent.parent / "sample_scenes" / "mirror_demo
 def run_demo(out_dir: Path, quiet: bool = False, sample: Path = SAMPLE) -> int:
     if not (sample / "pairs.csv").is_file():
         raise InputError(f"the embedded sample is missing ({sample}); run the demo from a MirrorCap checkout")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_folder(out_dir)
     truth = json.loads((sample / "truth.json").read_text(encoding="utf-8"))
     camera = Camera.load(sample / "camera.json")
     table = read_pairs(sample / "pairs.csv")

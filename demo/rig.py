@@ -33,7 +33,7 @@ import bpy
 import numpy as np
 
 from ..core.common.errors import InputError
-from ..core.common.files import write_files_atomically
+from ..core.common.files import output_folder, write_files_atomically
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "sample_scenes" / "rig_clip"
@@ -127,8 +127,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, flush=True))
     if not (sample / "clip.mp4").is_file():
         raise InputError(f"the embedded sample is missing ({sample}); run the demo from a MirrorCap checkout")
-    out_dir = Path(out_dir).resolve()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_folder(Path(out_dir).resolve())
     timings = {}
     t_all = time.perf_counter()
 

@@ -252,3 +252,20 @@ def test_outputs_get_normal_file_permissions(sample, capsys):
     os.umask(umask)
     assert (out.stat().st_mode & 0o777) == (0o666 & ~umask)
     assert (out.with_suffix(".json").stat().st_mode & 0o777) == (0o666 & ~umask)
+
+
+def test_output_folders_and_takes_that_are_the_wrong_kind_of_path(tmp_path, capsys):
+    """A file where a command's output folder goes (batch, demo-mirrors) and a folder where a take goes (info):
+    one line each, nothing made (were: a traceback, and a take "that does not exist")."""
+    taken = tmp_path / "taken.txt"
+    taken.write_text("a file, not a folder")
+    head = ROOT / "sample_scenes" / "generic_head" / "head.blend"
+    for args, message in [
+        (["batch", ROOT / "demo" / "missing.c3d", "--head", head, "--out", taken], "is a file"),
+        (["demo-mirrors", "--out", taken], "is a file"),
+        (["info", tmp_path], "is a folder"),
+        (["export", tmp_path, "-o", tmp_path / "points.csv"], "is a folder"),
+    ]:
+        code, _, err = _run(args, capsys)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and message in err, (args, err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["taken.txt"] and taken.read_text() == "a file, not a folder"

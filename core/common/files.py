@@ -45,6 +45,19 @@ def check_output_paths(*paths) -> None:
         named[key] = path
 
 
+def output_folder(path) -> Path:
+    """The folder ``path`` for a command's outputs, made (with its parents) where it does not exist yet; one clear
+    message when it cannot be: a file of that name, no permission."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"output folder {path} is a file: name a folder for the outputs")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot make output folder {path}: {exc.strerror or exc}") from None
+    return path
+
+
 def write_files_atomically(contents: dict) -> None:
     """Write ``{path: str | bytes}`` so that either every file is replaced by its new
     content or (on any error) none is touched and no temporary file is left."""

@@ -200,6 +200,8 @@ def read_c3d(path) -> dict:
     :class:`InputError` with one sentence for anything unreadable.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"take {path} is a folder, not a C3D file")
     if not path.is_file():
         raise InputError(f"take {path} does not exist")
     processor = _check_structure(path)

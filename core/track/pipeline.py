@@ -165,6 +165,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     from .coverage import coverage_warning, take_coverage
     from .selfcal import self_calibrate_mirror
 
+    check_output_paths(output, report)
     if len(frames) < 2:
         raise InputError("tracking needs at least 2 frames")
     det = ClipDetections.of(frames, camera)  # the one normalisation of the clip's pixels
