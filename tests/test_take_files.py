@@ -194,3 +194,18 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 141, err
     assert err == ""
+
+
+def test_takes_of_no_markers_or_no_measured_point(tmp_path, capsys):
+    """Another system's C3D of no markers exports as the CSV header alone, and one whose every marker-frame is a
+    gap is refused by `stabilize` with one message (were: an IndexError and numpy's "SVD did not converge")."""
+    empty = tmp_path / "no_markers.c3d"
+    _ezc3d_file(empty, [], np.zeros((10, 0, 3)), 100.0)
+    assert main(["export", str(empty), "-o", str(tmp_path / "e.csv"), "-q"]) == 0
+    assert (tmp_path / "e.csv").read_text() == "frame,label,x,y,z\n"
+    gaps = tmp_path / "all_gaps.c3d"
+    _ezc3d_file(gaps, [f"P{i}" for i in range(6)], np.full((10, 6, 3), np.nan), 100.0)
+    assert main(["stabilize", str(gaps), "-o", str(tmp_path / "s.c3d")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no measured point" in err, err
+    assert not (tmp_path / "s.c3d").exists()

@@ -252,8 +252,10 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, float)
-    if p.ndim != 3 or p.shape[2] != 3 or p.shape[1] == 0 or p.shape[0] == 0:
+    if p.ndim != 3 or p.shape[2] != 3:
         raise InputError("a take needs points of shape (frames, markers, 3)")
+    if p.shape[0] == 0 or p.shape[1] == 0:
+        raise InputError(f"the take holds {'no frame' if p.shape[0] == 0 else 'no marker'}: nothing to bind")
     F, M, _ = p.shape
     labels = [str(s) for s in labels]
     if len(labels) != M:

@@ -263,6 +263,8 @@ def points_csv(take: dict) -> str:
     numbered as in the file, a gap as empty cells."""
     pts = take["points"]
     F, M = pts.shape[:2]
+    if F * M == 0:                      # a take of no markers (or no frames): the header alone
+        return "frame,label,x,y,z\n"
     frames = np.repeat(np.arange(F) + take["first_frame"], M)
     labels = np.tile(np.array([_csv_cell(s) for s in take["labels"]], dtype=object), F)
     flat = pts.reshape(-1, 3)

@@ -284,6 +284,8 @@ def stabilize(points, labels, rigid=None, method: str = "invariants", pivot="aut
     F, M = pts.shape[:2]
     fps = rate or 60.0
     valid = np.all(np.isfinite(pts), axis=2)
+    if not valid.any():
+        raise InputError("the take holds no measured point (every marker-frame is a gap): no head motion to find")
     warnings = []
     if rigid is not None:
         names = list(dict.fromkeys(str(r) for r in rigid))
