@@ -394,8 +394,12 @@ def test_bind_bad_takes(head_and_keys):
     holey[0, 20] = np.nan
     with pytest.raises(InputError, match="marker count changes"):
         bind_take(head, labels, holey)
-    with pytest.raises(InputError, match="shape"):
+    with pytest.raises(InputError, match="holds no marker"):
         bind_take(head, [], np.zeros((3, 0, 3)))
+    with pytest.raises(InputError, match="holds no frame"):
+        bind_take(head, labels, np.zeros((0, len(labels), 3)))
+    with pytest.raises(InputError, match="shape"):
+        bind_take(head, labels, pts[..., :2])
 
 
 def test_fill_gaps_interpolates_linearly():
