@@ -55,6 +55,8 @@ from .singleview import follow_dots_through_gaps, measure_in_single_views, meeti
 from .motion import (ConstantVelocityKalman, conjecture_motion, conjecture_since_last_seen, false_tracking,
                      neighbours)
 from .pairing import candidate_tracks, continuing_candidate, direct_track_frames, paired_tracks, partner_blobs
+from .relocate import (RELOCATE_CONFLICT_SHARE, RELOCATE_CONFLICTS, RELOCATE_DROP, RELOCATE_MIN_MARKERS, on_candidates,
+                       relocate_head)
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, camera_mask_of, keep_measured
 from .seeds import seeded_tracks
 
@@ -398,7 +400,8 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
     head_pose = np.zeros((F, 6))
     assigned_blob = np.full((F, N), -1)
     candidate = np.full((F, N), -1)
-    counts = {k: np.zeros(F, int) for k in ("candidates", "measured", "false_tracking", "conflicts", "conjectured")}
+    counts = {k: np.zeros(F, int) for k in ("candidates", "measured", "false_tracking", "conflicts", "conjectured",
+                                             "relocated", "out_of_place")}
     is_rigid = np.ones(N, bool) if rigid is None else np.isin(np.arange(N), rigid)
     pose_weights = np.ones(N)  # robust weights, carried from frame to frame
     cand_key = np.c_[cands.points, det.colour[0][cands.direct] * COLOUR_SPACING_MM]
@@ -420,20 +423,10 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             trees.pop(u - 5, None)
         return trees[u]
 
-    for t in range(F):
-        sl = cands.at(t)
-        counts["candidates"][t] = sl.stop - sl.start
-        pose_pred = pose_kf.predict()
-        R_p, T_p = rotation_zyx(pose_pred[0]), pose_pred[1]
-        query[:, :3] = kf.predict() @ R_p.T + T_p
-        # each marker's gate follows how well it has been predicted lately: tight where
-        # predictions are good (fewer chance candidates), wide where the face moves fast
-        gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
-        # ... and widens while the marker is lost: its prediction is a conjecture, further off with each
-        # frame (LOST_GATE_GROWTH_MM a frame from the LOST_GATE_AFTER-th frame lost)
-        lost_for = t - 1 - last_frame
-        gate_i = np.where((last_frame >= 0) & (lost_for >= LOST_GATE_AFTER),
-                          np.minimum(gate_i + LOST_GATE_GROWTH_MM * lost_for, s.gate_mm), gate_i)
+    def associate():
+        """Steps 4-6 for frame ``t``: each marker's candidate in its gate around ``query`` (its prediction), the
+        2D tracks' continuity, markers coming back, conflicts. Returns ``(valid, candidate, distance, confirmed,
+        conflicts)``."""
         if sl.stop > sl.start:
             near, j = tree(t).query(query, distance_upper_bound=s.gate_mm)
             valid = (near <= gate_i) & (entry <= t)  # a late marker is measured from its first sighting on
@@ -495,11 +488,50 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 valid[back[~lasts]] = False
                 a = np.where(valid, a, -1)
             lost = _resolve_conflicts(a, near, keys)
-            counts["conflicts"][t] = lost.sum()
-            valid &= ~lost
-        else:
-            valid, a, near = np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf)
-            confirmed = np.zeros(N, bool)
+            return valid & ~lost, a, near, confirmed, int(lost.sum())
+        return np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf), np.zeros(N, bool), 0
+
+    for t in range(F):
+        sl = cands.at(t)
+        counts["candidates"][t] = sl.stop - sl.start
+        pose_pred = pose_kf.predict()
+        R_p, T_p = rotation_zyx(pose_pred[0]), pose_pred[1]
+        query[:, :3] = kf.predict() @ R_p.T + T_p
+        # each marker's gate follows how well it has been predicted lately: tight where
+        # predictions are good (fewer chance candidates), wide where the face moves fast
+        gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
+        # ... and widens while the marker is lost: its prediction is a conjecture, further off with each
+        # frame (LOST_GATE_GROWTH_MM a frame from the LOST_GATE_AFTER-th frame lost)
+        lost_for = t - 1 - last_frame
+        gate_i = np.where((last_frame >= 0) & (lost_for >= LOST_GATE_AFTER),
+                          np.minimum(gate_i + LOST_GATE_GROWTH_MM * lost_for, s.gate_mm), gate_i)
+        valid, a, near, confirmed, conflicts = associate()
+        known = (last_frame >= 0) & (entry <= t)
+        if t > 0 and known.sum() >= RELOCATE_MIN_MARKERS and sl.stop > sl.start and (
+                conflicts >= max(RELOCATE_CONFLICTS, RELOCATE_CONFLICT_SHARE * valid.sum())
+                or valid.sum() < RELOCATE_DROP * counts["measured"][t - 1]):
+            # the face may not be where the head pose says (a jump in the video): the markers that carry the head
+            # pose look for it (the expression may have changed across the jump), and the frame is looked at again
+            pick = known & is_rigid if (known & is_rigid).sum() >= RELOCATE_MIN_MARKERS else known
+            model = (query[pick, :3] - T_p) @ R_p
+            pose = relocate_head(model, colour[pick], tree(t), R_p, T_p)
+            following = tree(t + 1) if t + 1 < F else None
+            if pose is not None and following is not None and (
+                    on_candidates(model, colour[pick], following, *pose)
+                    <= on_candidates(model, colour[pick], following, R_p, T_p)):
+                # the face is back where it was in the next frame: this one frame is out of place (a frame of
+                # another moment, a glitch), and nothing is measured in it
+                valid, a, near, confirmed = np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf), np.zeros(N, bool)
+                counts["out_of_place"][t] = 1
+            elif pose is not None:
+                R_p, T_p = pose
+                pose_kf.position[:] = np.stack([angles_zyx(R_p), T_p])
+                pose_kf.velocity[:] = 0.0
+                query[:, :3] = ((query[:, :3] - pose_pred[1]) @ rotation_zyx(pose_pred[0])) @ R_p.T + T_p
+                kf.velocity[:] = 0.0
+                counts["relocated"][t] = 1
+                valid, a, near, confirmed, conflicts = associate()
+        counts["conflicts"][t] = conflicts
         meas_cam = cands.points[np.maximum(a, 0)] if len(cands.points) else np.zeros((N, 3))
         use = valid & is_rigid
         if use.sum() >= 4:
