@@ -697,7 +697,7 @@ def test_coverage_of_a_take_counts_frames_with_dots_and_names_sizes_only_when_kn
     assert cov["dot_px"] == [None, None, None] and "the dots measure" not in coverage_warning(cov)
 
 
-def test_a_frame_out_of_place_is_left_out_and_a_jump_is_followed(performance):
+def test_a_frame_out_of_place_is_left_out_and_a_jump_is_followed(performance, tmp_path):
     """Stop 44. A frame from another moment of the take (a glitch: frame 10's detections at frame 40) had the
     tracker follow the face there and lose most markers for the rest of the take (43 identity switches, 105 of
     208 markers measured a frame at its end): the head is looked for where the frame's conflicts jump
@@ -716,6 +716,14 @@ def test_a_frame_out_of_place_is_left_out_and_a_jump_is_followed(performance):
     assert np.all(result.stats["measured"][41:] > 0.9 * result.stats["measured"][39])
     s = _score(glitched, perf, result)
     assert s["switches"] == 0 and s["rms"] < 0.1
+    from mirrorcap.core.track.pipeline import track_detections
+
+    from mirrorcap.core.geometry.mirror import MirrorPlane
+
+    planes = [MirrorPlane(normal=np.asarray(n, float), d=float(d)) for n, d in rig.planes]
+    report = track_detections(list(range(80)), glitched, rig.camera, 30.0, tmp_path / "t.c3d", mirrors=planes)
+    said = [w for w in report["warnings"] if w.startswith("the face jumps in the video")]
+    assert len(said) == 1 and "frame(s) 40 show(s) it elsewhere" in said[0], report["warnings"]
     long_perf = rig_performance(rig, 300, head_motion_deg=10, expression_mm=5)
     _, frames = synthetic_detections(rig, 300, seed=1, performance=long_perf, noise_px=0.05)
     keep = np.r_[np.arange(100), np.arange(160, 300)]

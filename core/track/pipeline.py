@@ -132,6 +132,11 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                             video=source.compression(), between=washed)
 
 
+def _listed(frames) -> str:
+    """Frame numbers for a warning: the first six."""
+    return ", ".join(map(str, frames[:6])) + (", ..." if len(frames) > 6 else "")
+
+
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
     """Median depth of the 3D candidates of ``det`` under self-calibrated planes."""
     from .candidates import clip_candidates
@@ -240,6 +245,15 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     short = coverage_warning(coverage)
     if short:
         log.warning(short)
+    jumps = [numbers[t] for t in np.flatnonzero(result.stats.get("relocated", []))]
+    glitches = [numbers[t] for t in np.flatnonzero(result.stats.get("out_of_place", []))]
+    if jumps or glitches:
+        log.warning("the face jumps in the video" + (f" at frame(s) {_listed(jumps)} (a cut, or a recording paused "
+                                                     "and resumed): the head was found again there" if jumps else "")
+                    + ("; " if jumps and glitches else "")
+                    + (f" -- frame(s) {_listed(glitches)} show(s) it elsewhere than the frames around: left out"
+                       if glitches else "")
+                    + "; check the take there, or track the stretches apart (--frames START:END)")
     if result.undecided:
         log.warning(f"{len(result.undecided)} direct-view markers of the first frames could not be paired with a "
                     "mirror image (no 3D position): REPORT.json markers.undecided lists where they are")
