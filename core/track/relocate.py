@@ -11,10 +11,9 @@ from .result import COLOUR_SPACING_MM
 
 #: a frame whose markers clash over blobs (:func:`.tracker._resolve_conflicts`) this much -- at least
 #: RELOCATE_CONFLICTS, and RELOCATE_CONFLICT_SHARE of those measured -- or measures under RELOCATE_DROP as many as the
-#: frame before, is one
-#: where the face may not be where the head pose says: a jump in the video (a recording paused and resumed, two clips
-#: joined), after which every marker would take a neighbour's dot. There the head is found again
-#: (:func:`relocate_head`). On the 66 tracked stress, normal-light and held-out clips a 10-frame median of at most 7
+#: frame before, is one where the face may not be where the head pose says: a jump in the video (a recording paused
+#: and resumed, two clips joined), after which every marker would take a neighbour's dot. There the head is looked
+#: for (:func:`relocate_head`). On the 66 tracked stress, normal-light and held-out clips a 10-frame median of at most 7
 #: conflicts; after a jump of 100 frames of the bench take (6.6 mm) 22-26, of 200 frames 11 with a drop of 16 %
 RELOCATE_CONFLICTS = 8
 RELOCATE_CONFLICT_SHARE = 0.04
