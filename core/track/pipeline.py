@@ -132,9 +132,9 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                             video=source.compression(), between=washed)
 
 
-def _listed(frames) -> str:
-    """Frame numbers for a warning: the first six."""
-    return ", ".join(map(str, frames[:6])) + (", ..." if len(frames) > 6 else "")
+def _listed(items) -> str:
+    """Items (frame numbers, names) for a warning: the first six."""
+    return ", ".join(map(str, items[:6])) + (", ..." if len(items) > 6 else "")
 
 
 def _median_depth(det: ClipDetections, camera: Camera, cals, ds) -> float:
@@ -238,8 +238,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     f"({VIDEO_QUALITY_HINT})")
     dropped_seeds = [] if seeds is None else [n for n in seeds.names if n not in result.labels]
     if dropped_seeds:
-        log.warning(f"{len(dropped_seeds)} designation(s) of the seeds file did not hold ({', '.join(dropped_seeds[:6])}"
-                    f"{', ...' if len(dropped_seeds) > 6 else ''}): their direct and mirror points are not one dot, or the "
+        log.warning(f"{len(dropped_seeds)} designation(s) of the seeds file did not hold ({_listed(dropped_seeds)}"
+                    "): their direct and mirror points are not one dot, or the "
                     "marker was lost; fix them in the clip (Take To Clip, rename the marker's tracks) and Re-solve")
     coverage = take_coverage(det, result.assigned_blob >= 0)
     short = coverage_warning(coverage)

@@ -489,6 +489,10 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 a = np.where(valid, a, -1)
             lost = _resolve_conflicts(a, near, keys)
             return valid & ~lost, a, near, confirmed, int(lost.sum())
+        return unmeasured()
+
+    def unmeasured():
+        """:func:`associate`'s answer for a frame in which nothing is measured."""
         return np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf), np.zeros(N, bool), 0
 
     for t in range(F):
@@ -496,7 +500,8 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
         counts["candidates"][t] = sl.stop - sl.start
         pose_pred = pose_kf.predict()
         R_p, T_p = rotation_zyx(pose_pred[0]), pose_pred[1]
-        query[:, :3] = kf.predict() @ R_p.T + T_p
+        predicted = kf.predict()                    # each marker's predicted position, head frame
+        query[:, :3] = predicted @ R_p.T + T_p
         # each marker's gate follows how well it has been predicted lately: tight where
         # predictions are good (fewer chance candidates), wide where the face moves fast
         gate_i = np.clip(4.0 * innovation + 0.3, s.min_gate_mm, s.gate_mm)
@@ -513,7 +518,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             # the face may not be where the head pose says (a jump in the video): the markers that carry the head
             # pose look for it (the expression may have changed across the jump), and the frame is looked at again
             pick = known & is_rigid if (known & is_rigid).sum() >= RELOCATE_MIN_MARKERS else known
-            model = (query[pick, :3] - T_p) @ R_p
+            model = predicted[pick]
             pose = relocate_head(model, colour[pick], tree(t), R_p, T_p)
             following = tree(t + 1) if t + 1 < F else None
             if pose is not None and following is not None and (
@@ -521,7 +526,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                     <= on_candidates(model, colour[pick], following, R_p, T_p)):
                 # the face is back where it was in the next frame: this one frame is out of place (a frame of
                 # another moment, a glitch), and nothing is measured in it
-                valid, a, near, confirmed = np.zeros(N, bool), np.full(N, -1), np.full(N, np.inf), np.zeros(N, bool)
+                valid, a, near, confirmed, _ = unmeasured()
                 counts["out_of_place"][t] = 1
             elif pose is not None:
                 R_p, T_p = pose
