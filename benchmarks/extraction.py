@@ -13,6 +13,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
@@ -180,19 +181,12 @@ def run_normal_light_detection_benchmark(repeats: int = 3, progress=print) -> di
         times.append((time.perf_counter() - t0) / len(frames))
     out = {"clip": "sample_scenes/normal/light", "frames": source.frame_count,
            "extract_ms_per_frame": float(np.median(times) * 1e3), "threads": detection_threads()}
-    saved = os.environ.get(DETECT_THREADS_ENV)
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            for key, threads in (("detect_frames_per_s_one_thread", 1), ("detect_frames_per_s", out["threads"])):
-                os.environ[DETECT_THREADS_ENV] = str(threads)
+    with tempfile.TemporaryDirectory() as tmp:
+        for key, threads in (("detect_frames_per_s_one_thread", 1), ("detect_frames_per_s", out["threads"])):
+            with mock.patch.dict(os.environ, {DETECT_THREADS_ENV: str(threads)}):   # restored after
                 best = min(run_detection(source, os.path.join(tmp, "det.csv"), colors=colours,
                                          settings=settings)["timings_s"]["total"] for _ in range(repeats))
-                out[key] = source.frame_count / best
-    finally:
-        if saved is None:
-            os.environ.pop(DETECT_THREADS_ENV, None)
-        else:
-            os.environ[DETECT_THREADS_ENV] = saved
+            out[key] = source.frame_count / best
     progress(f"  normal light (light clip): extraction alone {out['extract_ms_per_frame']:.1f} ms/frame on one core; "
              f"whole detect {out['detect_frames_per_s_one_thread']:.0f} frames/s frame after frame, "
              f"{out['detect_frames_per_s']:.0f} frames/s on {out['threads']} threads")
