@@ -74,7 +74,9 @@ contact-sheet: $(STAMP)
 # deg, +-12 deg yaw), rendered at stop 37 to check its change and tuned on by nothing; side600 (1024x600, 220 dots of
 # 2.4 mm, mirrors at 50 deg, +-14 deg yaw, +-6 deg roll), rendered at stop 38 and the clip its tracker change was found
 # on; many1080 (1920x1080, 350 dots of 2 mm, mirrors at 46 deg, 60 frames), rendered at stop 40 and tuned on by
-# nothing. About 110 minutes.
+# nothing; askew720 (1280x720, 240 dots of 2.4 mm, a rig set up by hand: mirrors at 38 and 50 deg, tilted 10 deg
+# up and 6 deg down, the head 15 mm off the rig's axis and turned 10 deg towards one mirror), rendered at stop 45 and
+# tuned on by nothing. About 115 minutes.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -139,6 +141,9 @@ stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/many1080 --size 1920 1080 --focal 1700 \
 		--distance 650 --mirror-deg 46 --markers 350 --marker-mm 2.0 --head-deg 8 12 5 --tempo 1.5 --frames 60 \
 		--samples 4 --seed 507 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/askew720 --size 1280 720 --focal 1100 \
+		--distance 630 --mirror-deg 38 50 --mirror-tilt 10 -6 --head-offset 15 -8 --head-turn 3 10 2 --markers 240 \
+		--marker-mm 2.4 --head-deg 9 12 5 --tempo 2.0 --frames 90 --samples 4 --seed 441 --no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
 # (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps; and hd, held out (1920x1080,

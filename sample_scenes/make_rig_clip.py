@@ -36,7 +36,11 @@ Every property of the rig is an option, so other rigs make stress material
 (``sample_scenes/stress/``, ``make stress-clips``): ``--out DIR``, ``--size W H``,
 ``--focal PX``, ``--markers N``, ``--marker-mm D`` (dot diameter), ``--mirror-deg L`` (the
 mirrors' normals at +-L degrees from the optical axis, so the mirror planes sit at 90 - L
-degrees to it), ``--distance MM`` (camera to the head's origin), ``--head-deg RX RY RZ`` (largest
+degrees to it; ``--mirror-deg L0 L1``: a rig set up by hand, each mirror at its own angle),
+``--mirror-tilt T0 T1`` (each mirror's normal tilted from the horizontal, + looking up at the face
+from below), ``--distance MM`` (camera to the head's origin), ``--head-offset X Y`` (the head's rest
+position off the rig's axis, mm), ``--head-turn RX RY RZ`` (the pitch, yaw and roll the head motion
+swings about: a subject turned to one side), ``--head-deg RX RY RZ`` (largest
 pitch, yaw and roll of the head motion), ``--tempo T`` (expressions T times as fast and as
 frequent), ``--seed``. ``--truth-only`` recomputes an existing clip's truth.npz (same options)
 and its rig.json's views without rendering, to add what a newer version records.
@@ -67,6 +71,7 @@ from mirrorcap.core.face.headio import load_head_npz  # noqa: E402
 from mirrorcap.synthetic.headsim import head_motion, performance, place_markers  # noqa: E402
 from mirrorcap.core.capture.rig import ViewLayout  # noqa: E402
 from mirrorcap.core.geometry.mirror import reflect_points  # noqa: E402
+from mirrorcap.core.geometry.rigid import rotation_zyx  # noqa: E402
 from mirrorcap.synthetic.simulate import mirror_plane_from_angles, visibility  # noqa: E402
 
 OUT = HERE / "rig_clip"
@@ -91,6 +96,10 @@ class ClipSpec:
     focal_px: float = 1400.0
     head_distance_mm: float = 650.0      # head-frame origin (between the ears) from the camera
     mirror_longitude_deg: float = 65.0   # each mirror's normal from the optical axis
+    mirror1_longitude_deg: float | None = None  # mirror 1's, where the rig is not symmetric (None: the same)
+    mirror_tilt_deg: tuple = (0.0, 0.0)  # each mirror's normal tilted up (-) or down (+) from the horizontal
+    head_offset_mm: tuple = (0.0, 0.0)   # the head's rest position off the rig's axis (x right, y down)
+    head_turn_deg: tuple = (0.0, 0.0, 0.0)  # the pitch, yaw and roll the head's motion swings about
     marker_radius_mm: float = 1.25       # 2.5 mm dots
     n_markers: int = 150
     head_deg: tuple = (6.0, 6.0, 6.0)    # largest pitch, yaw, roll of the head motion
@@ -124,8 +133,9 @@ def subject_from_generic(head: HeadModel) -> np.ndarray:
 
 def rig_planes(spec: ClipSpec):
     """Mirror 0 (imaged left) then mirror 1, as ``(normal, d)``."""
-    return [mirror_plane_from_angles(s * spec.mirror_longitude_deg, 0.0, spec.mirror_centre, MIRROR_RADIUS_MM)
-            for s in (-1, 1)]
+    right = spec.mirror_longitude_deg if spec.mirror1_longitude_deg is None else spec.mirror1_longitude_deg
+    return [mirror_plane_from_angles(longitude, tilt, spec.mirror_centre, MIRROR_RADIUS_MM)
+            for longitude, tilt in zip((-spec.mirror_longitude_deg, right), spec.mirror_tilt_deg)]
 
 
 def rendered_triangles(head: HeadModel) -> np.ndarray:
@@ -186,7 +196,9 @@ def mirror_panels(spec: ClipSpec) -> list:
         touch = np.asarray(spec.mirror_centre) - n * MIRROR_RADIUS_MM
         along = (touch - foot) @ tangent
         s0, s1 = along - 190.0, along + 45.0
-        up = np.array([0.0, 1.0, 0.0])
+        up = np.array([0.0, 1.0, 0.0]) - n[1] * n            # in the plane (a tilted mirror leans)
+        up /= np.linalg.norm(up)
+        foot = foot + up * ((touch - foot) @ up - MIRROR_CENTRE_XY[1])  # a tilted panel: as high on the face
         panels.append(np.array([foot + tangent * s + up * h for s, h in ((s0, -150), (s1, -150), (s1, 170), (s0, 170))]))
     return panels
 
@@ -465,8 +477,16 @@ def main(argv=None) -> int:
     ap.add_argument("--focal", type=float, default=ClipSpec.focal_px, help="focal length in pixels")
     ap.add_argument("--markers", type=int, default=ClipSpec.n_markers)
     ap.add_argument("--marker-mm", type=float, default=2 * ClipSpec.marker_radius_mm, help="dot diameter")
-    ap.add_argument("--mirror-deg", type=float, default=ClipSpec.mirror_longitude_deg,
-                    help="each mirror's normal from the optical axis (the plane is at 90 - this)")
+    ap.add_argument("--mirror-deg", type=float, nargs="+", metavar="DEG", default=[ClipSpec.mirror_longitude_deg],
+                    help="each mirror's normal from the optical axis (the plane is at 90 - this); two values: "
+                         "mirror 0's (imaged left), then mirror 1's")
+    ap.add_argument("--mirror-tilt", type=float, nargs=2, metavar=("DEG0", "DEG1"), default=ClipSpec.mirror_tilt_deg,
+                    help="each mirror's normal tilted from the horizontal (+: the mirror looks up at the face "
+                         "from below)")
+    ap.add_argument("--head-offset", type=float, nargs=2, metavar=("X", "Y"), default=ClipSpec.head_offset_mm,
+                    help="the head's rest position off the rig's axis, mm (x right, y down)")
+    ap.add_argument("--head-turn", type=float, nargs=3, metavar=("RX", "RY", "RZ"), default=ClipSpec.head_turn_deg,
+                    help="the pitch, yaw and roll the head motion swings about (a subject turned to one side)")
     ap.add_argument("--distance", type=float, default=ClipSpec.head_distance_mm, help="camera to head, mm")
     ap.add_argument("--head-deg", type=float, nargs=3, metavar=("RX", "RY", "RZ"), default=ClipSpec.head_deg,
                     help="largest pitch, yaw, roll of the head motion")
@@ -485,8 +505,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.scan_landmarks_only:
         return rewrite_scan_landmarks(args.out.resolve())
+    if len(args.mirror_deg) > 2:
+        ap.error("--mirror-deg takes one angle (both mirrors) or two (mirror 0's, mirror 1's)")
     spec = ClipSpec(image_size=tuple(args.size), focal_px=args.focal, head_distance_mm=args.distance,
-                    mirror_longitude_deg=args.mirror_deg, marker_radius_mm=args.marker_mm / 2,
+                    mirror_longitude_deg=args.mirror_deg[0],
+                    mirror1_longitude_deg=args.mirror_deg[1] if len(args.mirror_deg) == 2 else None,
+                    mirror_tilt_deg=tuple(args.mirror_tilt), head_offset_mm=tuple(args.head_offset),
+                    head_turn_deg=tuple(args.head_turn), marker_radius_mm=args.marker_mm / 2,
                     n_markers=args.markers, head_deg=tuple(args.head_deg), tempo=args.tempo,
                     light=args.light, skin_rgb=skin_colour(args.skin))
     out = args.out.resolve()
@@ -504,7 +529,9 @@ def main(argv=None) -> int:
     verts, labels = place_markers(sub_head, spec.n_markers, seed=args.seed)
     disp, _ = performance(head, keys, args.frames, FPS, seed=args.seed, tempo=spec.tempo)
     R, t = head_motion(args.frames, FPS, max_deg=spec.head_deg, seed=args.seed)
-    t = t + np.array([0.0, 0.0, spec.head_distance_mm])
+    if any(spec.head_turn_deg):
+        R = rotation_zyx(np.radians(spec.head_turn_deg)) @ R        # the motion swings about a turned head
+    t = t + np.array([*spec.head_offset_mm, spec.head_distance_mm])
     marker_colors = np.arange(len(verts)) % len(spec.paints)
     rng.shuffle(marker_colors)
 
@@ -580,6 +607,10 @@ def main(argv=None) -> int:
     info = {"frames": args.frames, "fps": FPS, "markers": len(verts), "samples_per_pixel": args.samples,
             "image_size": list(spec.image_size), "focal_px": spec.focal_px,
             "head_distance_mm": spec.head_distance_mm, "mirror_longitude_deg": spec.mirror_longitude_deg,
+            **({"mirror1_longitude_deg": spec.mirror1_longitude_deg} if spec.mirror1_longitude_deg is not None else {}),
+            **({"mirror_tilt_deg": list(spec.mirror_tilt_deg)} if any(spec.mirror_tilt_deg) else {}),
+            **({"head_offset_mm": list(spec.head_offset_mm)} if any(spec.head_offset_mm) else {}),
+            **({"head_turn_deg": list(spec.head_turn_deg)} if any(spec.head_turn_deg) else {}),
             "marker_diameter_mm": 2 * spec.marker_radius_mm, "head_deg": list(spec.head_deg), "tempo": spec.tempo,
             "seed": args.seed, "light": spec.light, "paints": spec.paints,
             **({"skin_rgb": list(spec.skin_rgb)} if spec.light == "normal" else {}), "made_by": "sample_scenes/make_rig_clip.py"}
