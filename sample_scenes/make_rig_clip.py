@@ -97,7 +97,7 @@ class ClipSpec:
     head_distance_mm: float = 650.0      # head-frame origin (between the ears) from the camera
     mirror_longitude_deg: float = 65.0   # each mirror's normal from the optical axis
     mirror1_longitude_deg: float | None = None  # mirror 1's, where the rig is not symmetric (None: the same)
-    mirror_tilt_deg: tuple = (0.0, 0.0)  # each mirror's normal tilted up (-) or down (+) from the horizontal
+    mirror_tilt_deg: tuple = (0.0, 0.0)  # each mirror's normal tilted from the horizontal (+: looking up at the face)
     head_offset_mm: tuple = (0.0, 0.0)   # the head's rest position off the rig's axis (x right, y down)
     head_turn_deg: tuple = (0.0, 0.0, 0.0)  # the pitch, yaw and roll the head's motion swings about
     marker_radius_mm: float = 1.25       # 2.5 mm dots
