@@ -247,6 +247,8 @@ def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | 
     inner = (share >= f) & (share <= 1.0 - f)
     empty = inner & (counts <= min(counts[best[1]], counts[best[2]]))
     near_chosen = (np.abs(centres - centres[best[1]]) <= 4.0 * half) | (np.abs(centres - centres[best[2]]) <= 4.0 * half)
+    near_chosen |= _same_trough(counts <= VALLEY_MAX * typical, (best[1], best[2])) & (
+        (np.abs(centres - centres[best[1]]) <= 8.0 * half) | (np.abs(centres - centres[best[2]]) <= 8.0 * half))
     if (empty & ~near_chosen).any():
         return None
 
@@ -263,6 +265,16 @@ def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | 
         f"no empty gap between the views: split at the emptiest lines x = {b0:.0f} and {b1:.0f} "
         f"({best[0] / 2.0 / typical:.2f} of a view's dot density there); dots near them may be read in the wrong "
         "view -- give a rig file with --rig to place the views yourself"))
+
+
+def _same_trough(low, lines) -> np.ndarray:
+    """Which lines share a trough with one of ``lines`` (indices): the run of consecutive ``low`` lines
+    around each. Between a face and its mirror image the emptiest stretch can hold two empty lines with
+    a few stray dots between them (an ear, a cheek's edge: the close clip's 452 and 479 px, 27 px apart);
+    they are one valley, not an empty column inside a view (the caller takes such lines within 8 dots)."""
+    run = np.cumsum(np.r_[True, low[1:] != low[:-1]])          # a run number per line
+    chosen = [run[i] for i in lines if low[i]]
+    return low & np.isin(run, chosen)
 
 
 def load_rig_views(path) -> ViewLayout | None:
