@@ -212,7 +212,14 @@ def test_view_boundaries_through_dots_are_found():
     assert 300 <= first["emptiest_x"] <= 340 and first["emptiest_crowding"] == 0
     regions = rigfile.ViewLayout(regions={"mirror0": (0, 0, 400, 720), "direct": (400, 0, 720, 720),
                                           "mirror1": (720, 0, 1280, 720)})
-    assert rigfile.check_view_boundaries(x, regions, frames, 6.0) == cut
+    from_file = rigfile.check_view_boundaries(x, regions, frames, 6.0)
+    assert from_file == {**cut, "automatic": False} and cut["automatic"] is True
+    # the warning says what the user can do: a rig file's lines are checked, automatic ones need a rig file
+    # (stop 45: it blamed "the rig file's views" when no rig file had been given)
+    (by_file,), (by_split,) = rigfile.view_boundary_warnings(from_file), rigfile.view_boundary_warnings(cut)
+    assert "the rig file's views are misplaced" in by_file and "check the views" in by_file
+    assert "rig file's views" not in by_split and "moved across the line after the first frames" in by_split
+    assert "give a rig file with --rig" in by_split and "x = 400 (mirror0 | direct)" in by_split
     # the same check from a stream's fixed-size histogram of x (`mirrorcap detect`): the same verdicts and lines
     hist = rigfile.XHistogram()
     for chunk in np.array_split(rng.permutation(x), frames):

@@ -169,10 +169,12 @@ def check_view_boundaries(x, layout: ViewLayout, frames: int, dot_px: float) -> 
     the mirrors are turned so far towards the face that the cheeks pass in front of them) or the
     views touch there; either way dots near it are read in the wrong view. Density alone cannot
     tell the two apart -- a mirror image is densest at its foreshortened edge -- so the report
-    gives the emptiest line nearby for the user to judge. An automatic split's ``note`` (views that
-    touch, :func:`_valley_split`) is carried along."""
+    gives the emptiest line nearby for the user to judge. ``automatic``: the lines were split from the
+    first frames' detections (no rig file), whose ``note`` (views that touch, :func:`_valley_split`) is
+    carried along."""
     half = max(float(dot_px), 2.0)
-    out = {"boundaries": [], "crowded": False, **({"note": layout.note} if layout.note else {})}
+    out = {"boundaries": [], "crowded": False, "automatic": not layout.regions,
+           **({"note": layout.note} if layout.note else {})}
     if len(x) < 10 or frames < 1:
         return out
     if isinstance(x, XHistogram):
@@ -202,11 +204,18 @@ def view_boundary_warnings(check: dict | None) -> list:
     for b in (check or {}).get("boundaries", []):
         if b["crowded"]:
             left, right = b["between"]
+            if check.get("automatic"):   # split from the first frames: the head may cross the line later
+                cause = (f"the views touch there, or the face moved across the line after the first frames it was "
+                         f"split from (the emptiest line over the take is x = {b['emptiest_x']:.0f})")
+                fix = "give a rig file with --rig to place the views, or move the mirrors out or turn them away " \
+                      "from the face"
+            else:
+                cause = (f"the views touch there, or the rig file's views are misplaced (the emptiest line nearby is "
+                         f"x = {b['emptiest_x']:.0f})")
+                fix = "check the views, or move the mirrors out or turn them away from the face"
             out.append(f"the view boundary at x = {b['x']:.0f} ({left} | {right}) runs through dots "
-                       f"({b['dots_per_frame']:.1f} detections per frame within a dot of it): the views touch there, "
-                       f"or the rig file's views are misplaced (the emptiest line nearby is x = {b['emptiest_x']:.0f}); "
-                       "dots on the wrong side are read as the other view's -- check the views, or move the mirrors "
-                       "out or turn them away from the face")
+                       f"({b['dots_per_frame']:.1f} detections per frame within a dot of it): {cause}; "
+                       f"dots on the wrong side are read as the other view's -- {fix}")
     return out
 
 
