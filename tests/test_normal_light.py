@@ -458,6 +458,8 @@ def test_a_video_compressed_too_hard_links_the_mirrors_by_head_motion_and_says_s
     assert abs(ratio_error) < 0.004 and s["rms_mm"] < 0.8 and s["identity_switches"] == 0
     assert report["mirror_agreement"]["scattered"] is True and report["mirror_agreement"]["consistent"] is False
     assert "warning: the markers seen in both mirrors do not agree" in text
+    # ... and says that those markers were set aside: the scales came from the head's motion (stop 45)
+    assert "the mirrors' scales were linked through the head's motion instead" in text
     s, report, ratio_error, text = runs["hd_crf29"]
     assert report["mirror_scale_link"]["source"] == "markers tracked in both mirrors"
     warned = [w for w in report["warnings"] if w.startswith("the two mirrors' scales rest on only 1 marker")]

@@ -231,11 +231,16 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                     + ("check MIRRORS.json, or track without it to self-calibrate" if mirror_source == "file"
                        else "the mirrors moved, or the clip shows too few markers in both mirrors"))
     elif agreement["consistent"] is False:
+        # the scatter's markers are the ones a doubted shared link set aside: the scales came from the head's motion
+        set_aside = scale_link is not None and "shared_markers_link" in scale_link
         log.warning(f"the markers seen in both mirrors do not agree: their depths through the two mirrors scatter by "
                     f"{agreement['observed_sd']:.2f} {unit} (sd), where {agreement['expected_sd']:.2f} {unit} is "
                     f"expected ({agreement['markers']} markers) -- their mirror images are poorly found or wrongly "
-                    "paired, and the take's points through the mirrors may be too; check the dots in the mirrors "
-                    f"({VIDEO_QUALITY_HINT})")
+                    "paired"
+                    + (", so the mirrors' scales were linked through the head's motion instead; if the dots in the "
+                       "mirrors are poorly found, the take's points through the mirrors are off too" if set_aside
+                       else ", and the take's points through the mirrors may be too")
+                    + f"; check the dots in the mirrors ({VIDEO_QUALITY_HINT})")
     dropped_seeds = [] if seeds is None else [n for n in seeds.names if n not in result.labels]
     if dropped_seeds:
         log.warning(f"{len(dropped_seeds)} designation(s) of the seeds file did not hold ({_listed(dropped_seeds)}"
