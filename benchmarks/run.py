@@ -232,20 +232,32 @@ def _summary(speed, rows, expected, trials, seconds, ext=None, trk=None) -> str:
 def stress_summary(stress) -> list:
     lines = ["## Stress clips (Cycles, `make stress-clips`; whole `mirrorcap track`, mirrors self-calibrated)", "",
              "| clip | frames | markers (true) | RMS / p95 / max | points > 2 mm | identity switches | split labels "
-             "| seen marker-frames reported | never tracked | mirror ratio error | frames/s |",
-             "| --- |" + " --- |" * 10]
+             "| seen marker-frames reported | never tracked | mirror ratio error | frames/s "
+             "| without a rig file: reported / switches / points > 2 mm |",
+             "| --- |" + " --- |" * 11]
     for name, r in stress.items():
         if "refused" in r:
             lines.append(f"| {name} ({r['size'][0]}x{r['size'][1]}) | {r['frames']} | refused: {r['refused']} |"
-                         + " |" * 8)
+                         + " |" * 9)
             continue
         seen = r.get("seen_reported_fraction")
         lines.append(f"| {name} ({r['size'][0]}x{r['size'][1]}) | {r['frames']} | {r['markers']} ({r['markers_true']}) "
                      f"| {r['rms_mm']:.2f} / {r['p95_mm']:.2f} / {r['max_mm']:.1f} mm | {r['points_over_2mm']} | "
                      f"{r['identity_switches']} | {r['split_markers']} | "
                      f"{'-' if seen is None else f'{100 * seen:.1f} %'} | {r.get('never_tracked', '-')} | "
-                     f"{100 * r['mirror_ratio_error']:+.2f} % | {r['frames_per_s']:.0f} |")
+                     f"{100 * r['mirror_ratio_error']:+.2f} % | {r['frames_per_s']:.0f} | "
+                     f"{_without_rig_file(r.get('without_rig_file'))} |")
     return lines + [""]
+
+
+def _without_rig_file(w) -> str:
+    """A stress clip's figures tracked without its rig file (``without_rig_file``), for the summary."""
+    if w is None:
+        return "-"
+    if "refused" in w:
+        return "refused"
+    seen = w.get("seen_reported_fraction")
+    return f"{'-' if seen is None else f'{100 * seen:.1f} %'} / {w['identity_switches']} / {w['points_over_2mm']}"
 
 
 def loaded_summary(loaded: dict) -> list:
