@@ -206,7 +206,7 @@ def view_boundary_warnings(check: dict | None) -> list:
             left, right = b["between"]
             if check.get("automatic"):   # split from the first frames: the head may cross the line later
                 cause = (f"the views touch there, or the face moved across the line after the first frames it was "
-                         f"split from (the emptiest line over the take is x = {b['emptiest_x']:.0f})")
+                         f"split from (the emptiest line nearby, over the take, is x = {b['emptiest_x']:.0f})")
                 fix = "give a rig file with --rig to place the views, or move the mirrors out or turn them away " \
                       "from the face"
             else:
