@@ -229,7 +229,8 @@ def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | 
     equally empty lines. None when even they hold over ``VALLEY_MAX`` of a view's typical density
     (evenly spread detections: no views to find), or when another line inside the views, more than
     four dots from both, is as empty as the emptier of them (sparse markers leave empty columns
-    within a view: the split would be a guess)."""
+    within a view: the split would be a guess); a line within eight dots of a chosen one and joined to it
+    by lines under ``VALLEY_MAX`` of the density is the same valley (:func:`_same_trough`)."""
     half = max(float(half_px), 2.0)
     centres, counts, typical = _line_counts(lambda v: np.searchsorted(xs, v), xs[0], xs[-1], half)
     share = np.searchsorted(xs, centres) / xs.size            # detections left of each line (non-decreasing)
