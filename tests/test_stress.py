@@ -358,12 +358,8 @@ def test_a_rig_set_up_by_hand_self_calibrates_and_tracks(tmp_path, capsys):
     of the truth; 97.8 % of the seen marker-frames reported, no identity switch, 0.26 mm RMS (measured:
     its 42 points over 2 mm are the grazing-mirror failure the README names -- a marker's own direct dot
     paired with another dot's image in the 38 deg mirror -- and conjectures)."""
-    clip = ROOT / "sample_scenes" / "stress" / "askew720"
-    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "-o", tmp_path / "take.c3d",
-                           "--report", tmp_path / "take.json"], capsys)
-    assert code == 0, err
-    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
-    truth = np.load(clip / "truth.npz")
+    s, report, ratio_error, _ = _tracked_without_a_rig_file("askew720", tmp_path, capsys)
+    truth = np.load(ROOT / "sample_scenes" / "stress" / "askew720" / "truth.npz")
     for plane, normal in zip(report["mirrors"], truth["mirror_normals"]):
         assert np.degrees(np.arccos(min(1.0, float(np.dot(plane["normal"], normal))))) < 0.2
     assert abs(ratio_error) < 0.003
@@ -403,12 +399,8 @@ def test_held_out_turning_head_without_a_rig_file(tmp_path, capsys):
     the mirrors' scales 0.02 % apart. (Its one bad marker: a direct dot whose mirror images are both
     hidden, paired for 31 frames with another marker's image on its epipolar line, 7.9 mm off.)"""
 
-    clip = ROOT / "sample_scenes" / "stress" / "turn"
-    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "-o", tmp_path / "take.c3d",
-                           "--report", tmp_path / "take.json"], capsys)
-    assert code == 0, err
-    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
-    assert "no empty gap between the views" in out + err and report["view_layout"]["note"]
+    s, report, ratio_error, text = _tracked_without_a_rig_file("turn", tmp_path, capsys)
+    assert "no empty gap between the views" in text and report["view_layout"]["note"]
     assert abs(ratio_error) < 0.002
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_tracked"] >= 150
     assert s["rms_mm"] < 0.35
@@ -423,12 +415,8 @@ def test_a_close_face_without_a_rig_file(tmp_path, capsys):
     They are one valley now: the views split at x = 452 and 815 (its rig file: 478 and 812), with the
     note, and the take holds -- 99.5 % of the seen marker-frames reported (99.7 % with the rig file), no
     switch, 0.17 mm RMS, the mirrors' scales 0.01 % apart."""
-    clip = ROOT / "sample_scenes" / "stress" / "close"
-    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "-o", tmp_path / "take.c3d",
-                           "--report", tmp_path / "take.json"], capsys)
-    assert code == 0, err
-    s, report, ratio_error = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
-    assert "no empty gap between the views" in out + err and report["view_layout"]["note"]
+    s, report, ratio_error, text = _tracked_without_a_rig_file("close", tmp_path, capsys)
+    assert "no empty gap between the views" in text and report["view_layout"]["note"]
     assert abs(ratio_error) < 0.002
     assert s["identity_switches"] == 0 and s["split_markers"] == 0
     assert s["seen_reported_fraction"] >= 0.99 and s["rms_mm"] < 0.25
@@ -450,6 +438,17 @@ def test_a_sparse_rig_the_product_cannot_measure_is_refused_not_guessed(tmp_path
                           capsys)
     assert code == 2 and "cannot split the direct and mirror views" in err
     assert not any(tmp_path.iterdir())  # nothing written, nothing half-written
+
+
+def _tracked_without_a_rig_file(name, tmp_path, capsys):
+    """``mirrorcap track`` on the stress clip ``name`` as a new user runs it, with no rig file (the views split
+    automatically), mirrors self-calibrated: its scores against the truth (:func:`conftest.scored_take`), its
+    report, the mirrors' ratio error and what the command printed."""
+    clip = ROOT / "sample_scenes" / "stress" / name
+    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "-o", tmp_path / "take.c3d",
+                           "--report", tmp_path / "take.json"], capsys)
+    assert code == 0, err
+    return (*scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json"), out + err)
 
 
 def _tracked_stress_clip(name, tmp_path, capsys):

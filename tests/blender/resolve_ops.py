@@ -12,7 +12,6 @@ import sys
 from pathlib import Path
 
 import bpy
-import numpy as np
 
 import mirrorcap
 
