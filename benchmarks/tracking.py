@@ -193,6 +193,24 @@ def _rendered_clip(clip: Path) -> tuple:
     return camera, load_rig_views(clip / "rig.json"), made.get("light", "uv")
 
 
+def _scored(truth, camera, path) -> tuple:
+    """The take at ``path`` against a rendered clip's ``truth`` (truth.npz): its frames, its scores
+    (:func:`synthetic.evaluate.score_take`, with the marker-frames seen in the direct view and a mirror) and its
+    points over 2 mm."""
+    from mirrorcap.core.take.c3d import read_c3d
+    from mirrorcap.synthetic.evaluate import score_take
+
+    take = read_c3d(path)
+    F = take["points"].shape[0]
+    seen = None
+    if "visible" in truth.files:
+        vis = truth["visible"][:F]
+        seen = vis[:, 0] & (vis[:, 1] | vis[:, 2])
+    s = score_take(take["points"], truth["points"][:F], camera, conjectured=take["conjectured"], seen=seen)
+    err = s["error_mm"][:, s["ids"] >= 0]
+    return F, s, int(np.count_nonzero(err[np.isfinite(err)] > 2.0))
+
+
 def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> dict:
     """The whole ``mirrorcap track`` (mirrors self-calibrated, RIG.json's views) on each rendered
     stress clip (``make stress-clips``), ``repeats`` times: speed, and accuracy and completeness
@@ -206,9 +224,7 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
     from mirrorcap.core.capture.markers import ExtractionSettings
     from mirrorcap.core.capture.video import open_source
     from mirrorcap.core.common.errors import MirrorCapError
-    from mirrorcap.core.take.c3d import read_c3d
     from mirrorcap.core.track.pipeline import run_track
-    from mirrorcap.synthetic.evaluate import score_take
 
     default = [*sorted(STRESS_CLIPS.iterdir()), *sorted(NORMAL_CLIPS.iterdir())] if NORMAL_CLIPS.is_dir() else \
         sorted(STRESS_CLIPS.iterdir())
@@ -222,18 +238,6 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
         times, reports = [], []
         name = clip.name if light == "uv" else f"normal-light {clip.name}"
 
-        def scored(path):
-            """The take at ``path`` against the clip's truth: frames, scores, points over 2 mm."""
-            take = read_c3d(path)
-            F = take["points"].shape[0]
-            seen = None
-            if "visible" in truth.files:
-                vis = truth["visible"][:F]
-                seen = vis[:, 0] & (vis[:, 1] | vis[:, 2])
-            s = score_take(take["points"], truth["points"][:F], camera, conjectured=take["conjectured"], seen=seen)
-            err = s["error_mm"][:, s["ids"] >= 0]
-            return F, s, int(np.count_nonzero(err[np.isfinite(err)] > 2.0))
-
         with tempfile.TemporaryDirectory() as tmp:
             try:
                 for _ in range(repeats):
@@ -246,14 +250,14 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
                              "refused": str(exc), "light": light}
                 progress(f"  {clip.name}: refused -- {exc}")
                 continue
-            F, s, over_2mm = scored(Path(tmp) / "take.c3d")
+            F, s, over_2mm = _scored(truth, camera, Path(tmp) / "take.c3d")
             # as a new user tracks it: no rig file, the views split automatically (the rig files' lines come from
             # the clip's truth, where the fewest dots land in the wrong view)
             without = None
             if layout is not None:
                 try:
                     run_track(source, camera, Path(tmp) / "auto.c3d", extraction=ExtractionSettings(light=light))
-                    _, s_auto, over_auto = scored(Path(tmp) / "auto.c3d")
+                    _, s_auto, over_auto = _scored(truth, camera, Path(tmp) / "auto.c3d")
                     without = {"seen_reported_fraction": s_auto.get("seen_reported_fraction"),
                                "identity_switches": s_auto["identity_switches"], "points_over_2mm": over_auto,
                                "rms_mm": s_auto["rms_mm"]}

@@ -256,9 +256,9 @@ def _valley_split(xs, half_px: float, min_view_fraction: float) -> ViewLayout | 
     # (sparse markers leave empty columns within a view) makes the split a guess
     inner = (share >= f) & (share <= 1.0 - f)
     empty = inner & (counts <= min(counts[best[1]], counts[best[2]]))
-    near_chosen = (np.abs(centres - centres[best[1]]) <= 4.0 * half) | (np.abs(centres - centres[best[2]]) <= 4.0 * half)
-    near_chosen |= _same_trough(counts <= VALLEY_MAX * typical, (best[1], best[2])) & (
-        (np.abs(centres - centres[best[1]]) <= 8.0 * half) | (np.abs(centres - centres[best[2]]) <= 8.0 * half))
+    from_chosen = np.minimum(np.abs(centres - centres[best[1]]), np.abs(centres - centres[best[2]]))
+    near_chosen = (from_chosen <= 4.0 * half) | (
+        (from_chosen <= 8.0 * half) & _same_trough(counts <= VALLEY_MAX * typical, (best[1], best[2])))
     if (empty & ~near_chosen).any():
         return None
 

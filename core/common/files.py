@@ -32,7 +32,7 @@ def check_output_paths(*paths) -> None:
         if path is None:
             continue
         path = Path(path)
-        folder = path.parent if str(path.parent) else Path(".")
+        folder = path.parent                      # Path("take.c3d").parent is Path(".")
         if not folder.is_dir():
             raise InputError(f"output folder {folder} does not exist")
         if path.is_dir():
@@ -67,8 +67,7 @@ def write_files_atomically(contents: dict) -> None:
     try:
         for path, data in contents.items():
             path = Path(path)
-            folder = path.parent if str(path.parent) else Path(".")
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
             temps.append((tmp, path))
             os.chmod(tmp, mode_bits)  # mkstemp creates 0600; give the file the usual umask-based mode
             mode = "wb" if isinstance(data, bytes) else "w"

@@ -101,8 +101,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
 
     _check_camera(camera, source)
     check_output_paths(output, report)
-    if known_length is not None and not known_length[2] > 0:
-        raise InputError(f"--known-length must be a positive length in millimetres (not {known_length[2]:g})")
+    _check_known_length(known_length)
     extraction = extraction or ExtractionSettings()
     t0 = time.perf_counter()
     stream = DetectionStream(source, colors or ColorClasses.default(extraction.light), extraction, layout,
@@ -130,6 +129,13 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
                             rigid_source=rigid_source, log=log, seeds=seeds, view_check=views,
                             video=source.compression(), between=washed)
+
+
+def _check_known_length(known_length) -> None:
+    """``(label, label, mm)``: a positive length, refused before any work when not (the labels are known only once
+    the take is tracked)."""
+    if known_length is not None and not known_length[2] > 0:
+        raise InputError(f"--known-length must be a positive length in millimetres (not {known_length[2]:g})")
 
 
 def _listed(items) -> str:
@@ -171,6 +177,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     from .selfcal import self_calibrate_mirror
 
     check_output_paths(output, report)
+    _check_known_length(known_length)
     if len(frames) < 2:
         raise InputError("tracking needs at least 2 frames")
     det = ClipDetections.of(frames, camera)  # the one normalisation of the clip's pixels
@@ -206,8 +213,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
             raise InputError(f"--known-length names a marker that is not in the take ({a!r}, {b!r}); labels run "
                              f"{result.labels[0]}..{result.labels[-1]}") from None
         est = float(np.linalg.norm(result.neutral[ia] - result.neutral[ib]))
-        if not (mm > 0 and est > 0):
-            raise InputError("--known-length needs two distinct markers and a positive length")
+        if not est > 0:
+            raise InputError("--known-length needs two distinct markers")
         scale = mm / est
         points = points * scale
         head[:, 3:] *= scale

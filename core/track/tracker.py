@@ -519,7 +519,8 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
             # pose look for it (the expression may have changed across the jump). The frame keeps its markers'
             # candidates (taken again from the pose found: at a 60-frame cut of a synthetic take 200 switches
             # against 100); the head's filter restarts from that pose, and the frames after it are predicted from it
-            pick = known & is_rigid if (known & is_rigid).sum() >= RELOCATE_MIN_MARKERS else known
+            pick = known & is_rigid
+            pick = pick if pick.sum() >= RELOCATE_MIN_MARKERS else known
             model = predicted[pick]
             pose = relocate_head(model, colour[pick], tree(t), R_p, T_p)
             following = tree(t + 1) if t + 1 < F else None
