@@ -42,7 +42,9 @@ from below), ``--distance MM`` (camera to the head's origin), ``--head-offset X 
 position off the rig's axis, mm), ``--head-turn RX RY RZ`` (the pitch, yaw and roll the head motion
 swings about: a subject turned to one side), ``--head-deg RX RY RZ`` (largest
 pitch, yaw and roll of the head motion), ``--tempo T`` (expressions T times as fast and as
-frequent), ``--seed``. ``--truth-only`` recomputes an existing clip's truth.npz (same options)
+frequent), ``--shutter S`` (motion blur: each frame the mean, in linear light, of ``--blur-steps K``
+moments spread over the fraction S of the frame interval around its moment; the truth is each dot's mean
+position over them), ``--seed``. ``--truth-only`` recomputes an existing clip's truth.npz (same options)
 and its rig.json's views without rendering, to add what a newer version records.
 """
 
@@ -106,6 +108,8 @@ class ClipSpec:
     tempo: float = 1.0                   # expression speed and frequency
     light: str = "uv"                    # "uv": fluorescent dots under black light; "normal": coloured dots
     skin_rgb: tuple = SKIN_TONES["light"]  # sRGB skin colour under normal light
+    shutter: float = 0.0                 # fraction of the frame interval the shutter is open (0: no motion blur)
+    blur_steps: int = 6                  # moments rendered and averaged per frame while it is open
 
     @property
     def mirror_centre(self):
@@ -339,9 +343,6 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     scene.collection.objects.link(cam)
     scene.camera = cam
 
-    def srgb_to_linear(rgb):
-        return [((c / 255.0 + 0.055) / 1.055) ** 2.4 for c in rgb]
-
     def material(name, color=None, emission=None, glossy=False, roughness=None):
         mat = bpy.data.materials.new(name)
         mat.use_nodes = True
@@ -383,7 +384,7 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     if spec.light == "uv":
         skin.data.materials.append(material("skin_under_blacklight", color=(0.10, 0.07, 0.16)))
     else:
-        skin.data.materials.append(material("skin", color=srgb_to_linear(spec.skin_rgb), roughness=0.45))
+        skin.data.materials.append(material("skin", color=paint_linear(spec.skin_rgb), roughness=0.45))
     scene.collection.objects.link(skin)
 
     # markers: one mesh of 150 icospheres, one material per paint
@@ -404,9 +405,9 @@ def build_scene(bpy, head: HeadModel, subject, marker_colors, spec: ClipSpec):
     dots.polygons.foreach_set("loop_start", np.arange(0, allt.size, 3, dtype=np.int32))
     for name, rgb in spec.paints.items():
         if spec.light == "uv":
-            dots.materials.append(material(f"paint_{name}", emission=srgb_to_linear(rgb)))
+            dots.materials.append(material(f"paint_{name}", emission=paint_linear(rgb)))
         else:
-            dots.materials.append(material(f"paint_{name}", color=srgb_to_linear(rgb), roughness=0.7))
+            dots.materials.append(material(f"paint_{name}", color=paint_linear(rgb), roughness=0.7))
     dots.polygons.foreach_set("material_index", np.repeat(np.asarray(marker_colors, np.int32), len(tris)))
     dots.polygons.foreach_set("use_smooth", np.ones(len(allt), bool))
     dots.update()
@@ -495,6 +496,11 @@ def main(argv=None) -> int:
                     help="uv: fluorescent dots under black light; normal: matte coloured dots under studio light")
     ap.add_argument("--skin", default="light",
                     help=f"skin under normal light: {', '.join(SKIN_TONES)} or R,G,B (sRGB 0-255)")
+    ap.add_argument("--shutter", type=float, default=ClipSpec.shutter,
+                    help="motion blur: the fraction of each frame's interval the shutter is open (0.5: 1/60 s "
+                         "at 30 frames/s), rendered as --blur-steps moments averaged in linear light; 0: none")
+    ap.add_argument("--blur-steps", type=int, default=ClipSpec.blur_steps,
+                    help="moments rendered per frame while the shutter is open (each with --samples)")
     ap.add_argument("--no-scan", action="store_true", help="write no scan.ply / scan_landmarks.json")
     ap.add_argument("--truth-only", action="store_true",
                     help="render nothing: recompute the truth of an existing clip made with the same options "
@@ -513,11 +519,15 @@ def main(argv=None) -> int:
                     mirror_tilt_deg=tuple(args.mirror_tilt), head_offset_mm=tuple(args.head_offset),
                     head_turn_deg=tuple(args.head_turn), marker_radius_mm=args.marker_mm / 2,
                     n_markers=args.markers, head_deg=tuple(args.head_deg), tempo=args.tempo,
-                    light=args.light, skin_rgb=skin_colour(args.skin))
+                    light=args.light, skin_rgb=skin_colour(args.skin), shutter=args.shutter,
+                    blur_steps=args.blur_steps)
+    if not 0 <= spec.shutter <= 1 or spec.blur_steps < 2:
+        ap.error("--shutter takes a fraction of the frame interval in [0, 1], --blur-steps at least 2")
     out = args.out.resolve()
     cache = HERE / ".cache" / f"{out.name}_frames"
 
     import bpy
+    import cv2
 
     from mirrorcap.addon.common.frames import core_to_blender
     from mirrorcap.addon.common.video_out import h264_output
@@ -528,10 +538,7 @@ def main(argv=None) -> int:
     sub_head = dataclasses.replace(head, vertices=subject, name="subject")
     verts, labels = place_markers(sub_head, spec.n_markers, seed=args.seed)
     disp, _ = performance(head, keys, args.frames, FPS, seed=args.seed, tempo=spec.tempo)
-    R, t = head_motion(args.frames, FPS, max_deg=spec.head_deg, seed=args.seed)
-    if any(spec.head_turn_deg):
-        R = rotation_zyx(np.radians(spec.head_turn_deg)) @ R        # the motion swings about a turned head
-    t = t + np.array([*spec.head_offset_mm, spec.head_distance_mm])
+    R, t = head_pose(spec, args.frames, args.seed)
     marker_colors = np.arange(len(verts)) % len(spec.paints)
     rng.shuffle(marker_colors)
 
@@ -547,28 +554,50 @@ def main(argv=None) -> int:
     visible = np.zeros((args.frames, 3, len(verts)), bool)
     imaged = np.zeros_like(visible)                     # any dot not edge-on or hidden: the detector finds it
     t0 = time.perf_counter()
-    for f in range(args.frames):
-        q = subject + disp[f]
+
+    def placed(q, R_f, t_f):
+        """The skin's vertices, the dots' centres and their normals in the camera frame."""
         normals = sub_head.vertex_normals(q)
         centre_q = q[verts] + MARKER_LIFT_MM * normals[verts]
-        cam_v = q @ R[f].T + t[f]
-        points[f] = centre_q @ R[f].T + t[f]
+        return q @ R_f.T + t_f, centre_q @ R_f.T + t_f, normals[verts] @ R_f.T
+
+    def render(png, cam_v, dots_at):
+        skin.data.vertices.foreach_set("co", core_to_blender(cam_v).astype(np.float32).ravel())
+        skin.data.update()
+        dots = (core_to_blender(dots_at)[:, None, :] + unit[None]).reshape(-1, 3)
+        markers.data.vertices.foreach_set("co", dots.astype(np.float32).ravel())
+        markers.data.update()
+        scene.render.filepath = str(png)
+        bpy.ops.render.render(write_still=True)
+
+    for f in range(args.frames):
+        cam_v, points[f], dot_normals = placed(subject + disp[f], R[f], t[f])
         if args.preview is None:
             visible[f], imaged[f] = marker_visibility(camera, planes, panels, cam_v, skin_T, points[f],
-                                                      normals[verts] @ R[f].T, max_deg=(VISIBLE_DEG, IMAGED_DEG))
+                                                      dot_normals, max_deg=(VISIBLE_DEG, IMAGED_DEG))
+        if spec.shutter > 0:  # the shutter open around the frame's moment: the dots' smear, centred on their mean
+            at = f + spec.shutter * ((np.arange(spec.blur_steps) + 0.5) / spec.blur_steps - 0.5)
+            sub_disp, _ = performance(head, keys, args.frames, FPS, seed=args.seed, tempo=spec.tempo, at=at)
+            sub_R, sub_t = head_pose(spec, args.frames, args.seed, at=at)
+            moments = [placed(subject + d, r, tt)[:2] for d, r, tt in zip(sub_disp, sub_R, sub_t)]
+            points[f] = np.mean([dots_at for _, dots_at in moments], axis=0)
         if f not in frames:
             continue
         png = cache / f"frame_{f:04d}.png" if args.preview is None else HERE / ".cache" / "preview.png"
         if png.is_file() and args.preview is None:
             continue
-        skin.data.vertices.foreach_set("co", core_to_blender(cam_v).astype(np.float32).ravel())
-        skin.data.update()
-        dots = (core_to_blender(points[f])[:, None, :] + unit[None]).reshape(-1, 3)
-        markers.data.vertices.foreach_set("co", dots.astype(np.float32).ravel())
-        markers.data.update()
-        scene.render.filepath = str(png)
         scene.render.image_settings.file_format = "PNG"
-        bpy.ops.render.render(write_still=True)
+        if spec.shutter <= 0:
+            render(png, cam_v, points[f])
+        else:
+            scene.render.image_settings.color_depth = "16"
+            open_png = png.with_name(png.stem + "_open.png")
+            light = 0.0
+            for moment_v, dots_at in moments:
+                render(open_png, moment_v, dots_at)
+                light = light + srgb_to_linear(cv2.imread(str(open_png), cv2.IMREAD_UNCHANGED) / 65535.0)
+            cv2.imwrite(str(png), np.round(linear_to_srgb(light / len(moments)) * 255).astype(np.uint8))
+            open_png.unlink()
         done = f + 1
         print(f"frame {done}/{args.frames}  {time.perf_counter() - t0:.0f} s", flush=True)
     if args.preview is not None:
@@ -612,6 +641,7 @@ def main(argv=None) -> int:
             **({"head_offset_mm": list(spec.head_offset_mm)} if any(spec.head_offset_mm) else {}),
             **({"head_turn_deg": list(spec.head_turn_deg)} if any(spec.head_turn_deg) else {}),
             "marker_diameter_mm": 2 * spec.marker_radius_mm, "head_deg": list(spec.head_deg), "tempo": spec.tempo,
+            **({"shutter": spec.shutter, "blur_steps": spec.blur_steps} if spec.shutter > 0 else {}),
             "seed": args.seed, "light": spec.light, "paints": spec.paints,
             **({"skin_rgb": list(spec.skin_rgb)} if spec.light == "normal" else {}), "made_by": "sample_scenes/make_rig_clip.py"}
     out.mkdir(parents=True, exist_ok=True)
@@ -630,6 +660,31 @@ def main(argv=None) -> int:
     size = (out / "clip.mp4").stat().st_size
     print(f"{out / 'clip.mp4'}: {size / 1e6:.2f} MB, {args.frames} frames; truth, scan and camera beside it")
     return 0
+
+
+def head_pose(spec: ClipSpec, n_frames: int, seed: int, at=None):
+    """The head's pose ``R (F, 3, 3)``, ``t (F, 3)`` at each frame (or at the frame numbers
+    ``at``, fractions allowed): the performance's motion about the spec's turn and offset."""
+    R, t = head_motion(n_frames, FPS, max_deg=spec.head_deg, seed=seed, at=at)
+    if any(spec.head_turn_deg):
+        R = rotation_zyx(np.radians(spec.head_turn_deg)) @ R        # the motion swings about a turned head
+    return R, t + np.array([*spec.head_offset_mm, spec.head_distance_mm])
+
+
+def srgb_to_linear(c):
+    """sRGB-encoded values in [0, 1] -> linear light (IEC 61966-2-1)."""
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def paint_linear(rgb) -> list:
+    """An sRGB colour (0-255) as the linear RGB a material takes."""
+    return srgb_to_linear(np.asarray(rgb, float) / 255.0).tolist()
+
+
+def linear_to_srgb(c):
+    """Linear light in [0, 1] -> sRGB-encoded values."""
+    c = np.clip(c, 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
 def skin_colour(text: str) -> tuple:

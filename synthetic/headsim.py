@@ -33,14 +33,21 @@ SINGLE_UNITS = ("cheekPuff", "jawForward", "jawLeft", "jawRight", "mouthClose", 
                 "mouthShrugUpper", "eyeSquintLeft", "eyeSquintRight", "eyeWideLeft", "eyeWideRight")
 
 
+def _sample_times(n_frames: int, fps: float, at) -> np.ndarray:
+    """Seconds of the samples: each frame's start, or ``at`` (frame numbers, fractions allowed:
+    the same performance between frames, e.g. while a shutter is open)."""
+    return (np.arange(n_frames) if at is None else np.asarray(at, float)) / fps
+
+
 def channel_weights(n_frames: int, fps: float, n_channels: int, seed: int = 0, events_per_s: float = 0.6,
-                    tempo: float = 1.0):
+                    tempo: float = 1.0, at=None):
     """Smooth weights ``(F, C)`` in [0, 1]: random raised-cosine events (0.4-1.2 s long,
     divided by ``tempo``; ``tempo`` times as many), none before 0.1 s, so the first frame is
-    the neutral face."""
+    the neutral face. ``at``: sample there instead (frame numbers, :func:`_sample_times`; the
+    events are those of ``n_frames`` frames)."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n_frames) / fps
-    W = np.zeros((n_frames, n_channels))
+    t = _sample_times(n_frames, fps, at)
+    W = np.zeros((len(t), n_channels))
     T = n_frames / fps
     for c in range(n_channels):
         n_ev = rng.poisson(tempo * events_per_s * T / max(n_channels / 4, 1)) + 1
@@ -54,8 +61,9 @@ def channel_weights(n_frames: int, fps: float, n_channels: int, seed: int = 0, e
 
 
 def performance(head: HeadModel, shape_keys: dict, n_frames: int, fps: float = 30.0, seed: int = 0,
-                channels: dict | None = None, singles: tuple = (), tempo: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex displacements ``(F, V, 3)`` and channel weights ``(F, C)`` (``tempo``: see
+                channels: dict | None = None, singles: tuple = (), tempo: float = 1.0,
+                at=None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex displacements ``(F, V, 3)`` and channel weights ``(F, C)`` (``tempo``, ``at``: see
     :func:`channel_weights`)."""
     channels = dict(EXPRESSIONS if channels is None else channels)
     for u in singles:
@@ -64,7 +72,7 @@ def performance(head: HeadModel, shape_keys: dict, n_frames: int, fps: float = 3
     if missing:
         raise InputError("the head lacks the shape keys " + ", ".join(missing))
     basis = np.stack([sum(w * shape_keys[u] for u, w in mix.items()) for mix in channels.values()])  # (C, V, 3)
-    W = channel_weights(n_frames, fps, len(channels), seed, tempo=tempo)
+    W = channel_weights(n_frames, fps, len(channels), seed, tempo=tempo, at=at)
     return np.einsum("fc,cvd->fvd", W, basis), W
 
 
@@ -98,12 +106,13 @@ def place_markers(head: HeadModel, n_markers: int, seed: int = 0) -> tuple[np.nd
     return np.asarray(verts, np.int64), labels
 
 
-def head_motion(n_frames: int, fps: float, max_deg=10.0, seed: int = 0):
+def head_motion(n_frames: int, fps: float, max_deg=10.0, seed: int = 0, at=None):
     """A smooth rigid head motion: ``R (F, 3, 3)``, ``t (F, 3)`` mm, starting at identity.
     ``max_deg``: the largest rotation about each axis, one number or ``(rx, ry, rz)`` --
-    pitch, yaw and roll in the camera frame (eq. 5.4)."""
+    pitch, yaw and roll in the camera frame (eq. 5.4). ``at``: sampled there instead (frame
+    numbers, :func:`_sample_times`)."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n_frames) / fps
+    t = _sample_times(n_frames, fps, at)
     freq = rng.uniform(0.1, 0.4, (3, 1))
     phase = rng.uniform(0, 2 * np.pi, (3, 1))
     amplitude = np.deg2rad(np.broadcast_to(np.asarray(max_deg, float), (3,)))
