@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cat requirements.txt requirements-dev.txt pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench sample head character rig-clip stress-clips normal-clips compressed-clips extension contact-sheet clean venv
+.PHONY: demo test bench sample head character rig-clip stress-clips normal-clips compressed-clips occluded-clips extension contact-sheet clean venv
 
 venv: $(STAMP)
 
@@ -190,6 +190,16 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 125,85,65 --out sample_scenes/normal/umber600 \
 		--size 960 600 --focal 950 --markers 180 --marker-mm 3.0 --mirror-deg 42 --distance 680 --head-deg 9 10 6 \
 		--tempo 1.8 --frames 60 --samples 4 --seed 7433 --no-scan
+
+# Stress clips with an object passed in front of the face (stop 46): a dark sphere -- a hand or a microphone under
+# black light -- swept sideways before the lower face (sample_scenes/occlude_clip.py), hiding the mouth's dots from
+# the camera for 36-61 frames while the mirrors still see them; the truth's `visible` follows. Half a minute.
+occluded-clips: $(STAMP)
+	$(PY) sample_scenes/occlude_clip.py sample_scenes/stress/fast720 sample_scenes/occluded/fast720_hand --frames 20 60 \
+		--ahead-mm 60
+	$(PY) sample_scenes/occlude_clip.py sample_scenes/stress/tempo720 sample_scenes/occluded/tempo720_hand --frames 30 65
+	$(PY) sample_scenes/occlude_clip.py sample_scenes/stress/dense sample_scenes/occluded/dense_hand --frames 100 160 \
+		--radius-mm 35
 
 # The normal-light clips above as a camera or a screen recorder would keep them (issue #18, stop 41): hd re-encoded
 # through Blender's FFmpeg at H.264 CRF 26 and 29 (4.1 and 2.0 Mbit/s at 1080p), light at CRF 26 (3.5 Mbit/s at

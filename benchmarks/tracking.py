@@ -178,6 +178,7 @@ def run_track_command_benchmark(n_frames: int = 600, repeats: int = 3, progress=
 
 STRESS_CLIPS = Path(__file__).resolve().parents[1] / "sample_scenes" / "stress"
 NORMAL_CLIPS = Path(__file__).resolve().parents[1] / "sample_scenes" / "normal"   # issue #21
+OCCLUDED_CLIPS = Path(__file__).resolve().parents[1] / "sample_scenes" / "occluded"   # stop 46
 
 
 def _rendered_clip(clip: Path) -> tuple:
@@ -213,7 +214,7 @@ def _scored(truth, camera, path) -> tuple:
 
 def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> dict:
     """The whole ``mirrorcap track`` (mirrors self-calibrated, RIG.json's views) on each rendered
-    stress clip (``make stress-clips``), ``repeats`` times: speed, and accuracy and completeness
+    stress clip (``make stress-clips``, ``normal-clips``, ``compressed-clips``, ``occluded-clips``), ``repeats`` times: speed, and accuracy and completeness
     against the clip's truth -- RMS / p95 / max after one similarity, identity switches, markers
     split over two labels, and the share of the marker-frames seen in the direct view and a
     mirror (truth.npz ``visible``) that the take reports. A clip the product refuses is recorded with
@@ -226,8 +227,8 @@ def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> d
     from mirrorcap.core.common.errors import MirrorCapError
     from mirrorcap.core.track.pipeline import run_track
 
-    default = [*sorted(STRESS_CLIPS.iterdir()), *sorted(NORMAL_CLIPS.iterdir())] if NORMAL_CLIPS.is_dir() else \
-        sorted(STRESS_CLIPS.iterdir())
+    default = [clip for folder in (STRESS_CLIPS, NORMAL_CLIPS, OCCLUDED_CLIPS) if folder.is_dir()
+               for clip in sorted(folder.iterdir())]
     folders = [p for p in (default if clips is None else map(Path, clips))
                if (p / "clip.mp4").is_file() and (p / "truth.npz").is_file()]
     out = {}

@@ -22,6 +22,48 @@ from pathlib import Path
 CRF = {"HIGH": 20, "MEDIUM": 23, "LOW": 26, "VERYLOW": 29, "LOWEST": 32}
 
 
+def read_frames(video: Path, work: Path) -> tuple[int, int, int]:
+    """Every frame of ``video`` as ``work/frame_NNNN.png``; returns (frames, width, height)."""
+    import cv2
+
+    capture = cv2.VideoCapture(str(video))
+    if not capture.isOpened():
+        raise SystemExit(f"error: cannot read {video}")
+    frames, width, height = 0, 0, 0
+    while True:
+        ok, image = capture.read()
+        if not ok:
+            break
+        cv2.imwrite(str(work / f"frame_{frames:04d}.png"), image)
+        height, width = image.shape[:2]
+        frames += 1
+    if frames == 0:
+        raise SystemExit(f"error: no frame in {video}")
+    return frames, width, height
+
+
+def encode_frames(work: Path, frames: int, size: tuple, fps: int, video: Path, quality: str) -> None:
+    """``work/frame_NNNN.png`` (``frames`` of them, ``size`` (w, h)) to ``video``: H.264 through
+    Blender's FFmpeg at the constant-rate preset ``quality`` (a GOP of a second)."""
+    import bpy
+
+    from mirrorcap.addon.common.video_out import h264_output
+
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+    scene.render.fps = fps
+    scene.frame_start, scene.frame_end = 1, frames
+    scene.view_settings.view_transform = "Standard"
+    editor = scene.sequence_editor_create()
+    strips = editor.strips if hasattr(editor, "strips") else editor.sequences
+    strip = strips.new_image("frames", str(work / "frame_0000.png"), channel=1, frame_start=1)
+    for f in range(1, frames):
+        strip.elements.append(f"frame_{f:04d}.png")
+    h264_output(scene.render, video, quality, gop_size=fps)
+    bpy.ops.render.render(animation=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("source", type=Path, help="a clip folder of make_rig_clip.py")
@@ -30,44 +72,13 @@ def main(argv=None) -> int:
                         help="Blender's constant-rate preset (default LOW: CRF 26)")
     args = parser.parse_args(argv)
 
-    import bpy
-    import cv2
-
-    from mirrorcap.addon.common.video_out import h264_output
-
     made = json.loads((args.source / "clip.json").read_text())
-    capture = cv2.VideoCapture(str(args.source / "clip.mp4"))
-    if not capture.isOpened():
-        print(f"error: cannot read {args.source / 'clip.mp4'}", file=sys.stderr)
-        return 2
     work = Path(tempfile.mkdtemp(prefix="reencode-"))
     try:
-        frames = 0
-        while True:
-            ok, image = capture.read()
-            if not ok:
-                break
-            cv2.imwrite(str(work / f"frame_{frames:04d}.png"), image)
-            height, width = image.shape[:2]
-            frames += 1
-        if frames == 0:
-            print(f"error: no frame in {args.source / 'clip.mp4'}", file=sys.stderr)
-            return 2
-        scene = bpy.context.scene
-        scene.render.resolution_x, scene.render.resolution_y = width, height
-        scene.render.resolution_percentage = 100
-        scene.render.fps = int(made.get("fps", 30))
-        scene.frame_start, scene.frame_end = 1, frames
-        scene.view_settings.view_transform = "Standard"
-        editor = scene.sequence_editor_create()
-        strips = editor.strips if hasattr(editor, "strips") else editor.sequences
-        strip = strips.new_image("frames", str(work / "frame_0000.png"), channel=1, frame_start=1)
-        for f in range(1, frames):
-            strip.elements.append(f"frame_{f:04d}.png")
+        frames, width, height = read_frames(args.source / "clip.mp4", work)
         staged = work / "clip"
         staged.mkdir()
-        h264_output(scene.render, staged / "clip.mp4", args.quality, gop_size=scene.render.fps)
-        bpy.ops.render.render(animation=True)
+        encode_frames(work, frames, (width, height), int(made.get("fps", 30)), staged / "clip.mp4", args.quality)
         for f in args.source.iterdir():
             if f.is_file() and f.name not in ("clip.mp4", "clip.json"):
                 shutil.copy2(f, staged / f.name)

@@ -349,6 +349,96 @@ def test_the_clip_maker_sets_up_rigs_by_hand():
         sys.modules.pop("make_rig_clip", None)
 
 
+def test_the_clip_maker_blurs_motion_over_the_open_shutter():
+    """``--shutter S``: each frame is the mean, in linear light, of ``--blur-steps`` moments of the same
+    performance spread over the S of the frame interval around the frame's moment (a real camera's
+    exposure). The moments between frames come from the same continuous head motion and expressions
+    (``at``), and the default (no blur) is the clip of before."""
+    import importlib.util
+    import sys
+
+    from mirrorcap.core.face.headio import load_head_npz
+    from mirrorcap.synthetic.headsim import performance
+
+    spec = importlib.util.spec_from_file_location("make_rig_clip", ROOT / "sample_scenes" / "make_rig_clip.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["make_rig_clip"] = module
+    try:
+        spec.loader.exec_module(module)
+        rig = module.ClipSpec(head_deg=(10.0, 14.0, 5.0), head_turn_deg=(0.0, 8.0, 0.0), head_offset_mm=(10.0, 0.0))
+        R, t = module.head_pose(rig, 90, 461)
+        R_at, t_at = module.head_pose(rig, 90, 461, at=np.arange(90.0))
+        assert np.array_equal(R, R_at) and np.array_equal(t, t_at)          # frames sampled as before
+        # between frames 40 and 41, the motion passes between the two frames' poses
+        R_half, t_half = module.head_pose(rig, 90, 461, at=[40.5])
+        assert np.linalg.norm(t_half[0] - (t[40] + t[41]) / 2) < 0.05 * np.linalg.norm(t[41] - t[40]) + 1e-9
+        assert np.linalg.norm(R_half[0] - (R[40] + R[41]) / 2) < 0.05 * np.linalg.norm(R[41] - R[40])
+        head, keys = load_head_npz(ROOT / "sample_scenes" / "generic_head" / "head.npz", with_shape_keys=True)
+        disp, _ = performance(head, keys, 90, 30.0, seed=461, tempo=3.0)
+        disp_at, _ = performance(head, keys, 90, 30.0, seed=461, tempo=3.0, at=[39.0, 39.5, 40.0])
+        assert np.array_equal(disp_at[[0, 2]], disp[[39, 40]])
+        assert np.abs(disp[40] - disp[39]).max() > 0.5                     # the expression moves there ...
+        twice, _ = performance(head, keys, 180, 60.0, seed=461, tempo=3.0)  # ... as a take at twice the rate has it
+        assert np.array_equal(disp_at[1], twice[79])
+        assert np.abs(disp_at[1] - disp[39]).max() > 0.1 and np.abs(disp_at[1] - disp[40]).max() > 0.1
+        # a smear is light averaged, not sRGB values: a dot lit half the exposure is 188 of 255, not 128
+        half = module.linear_to_srgb((module.srgb_to_linear(np.array([1.0])) + module.srgb_to_linear(np.array([0.0]))) / 2)
+        assert round(float(half[0]) * 255) == 188
+        assert module.paint_linear((255, 110, 200)) == pytest.approx([((c / 255 + 0.055) / 1.055) ** 2.4
+                                                                      for c in (255, 110, 200)])
+    finally:
+        sys.modules.pop("make_rig_clip", None)
+
+
+def test_an_object_passed_before_the_face_hides_the_dots_the_truth_says(tmp_path):
+    """sample_scenes/occlude_clip.py (`make occluded-clips`): a dark sphere swept before the lower face.
+    What the picture shows and what the truth says agree: every marker the truth newly hides in the
+    direct view has the sphere over its dot in the frame, every marker it keeps has its dot still lit
+    there, and outside the sphere's frames nothing changes."""
+    import importlib.util
+    import sys
+
+    import cv2
+
+    from mirrorcap.core.geometry.camera import Camera
+
+    source = ROOT / "sample_scenes" / "stress" / "webcam"
+    spec = importlib.util.spec_from_file_location("occlude_clip", ROOT / "sample_scenes" / "occlude_clip.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["occlude_clip"] = module
+    try:
+        spec.loader.exec_module(module)
+        assert module.main([str(source), str(tmp_path / "hand"), "--frames", "30", "50", "--radius-mm", "30"]) == 0
+    finally:
+        sys.modules.pop("occlude_clip", None)
+    before, after = np.load(source / "truth.npz"), np.load(tmp_path / "hand" / "truth.npz")
+    assert np.array_equal(before["points"], after["points"])
+    assert np.array_equal(before["visible"][:30], after["visible"][:30])
+    assert np.array_equal(before["visible"][51:], after["visible"][51:])
+    assert not (after["visible"] & ~before["visible"]).any()
+    camera = Camera.from_dict(json.loads((source / "camera.json").read_text()))
+    video = cv2.VideoCapture(str(tmp_path / "hand" / "clip.mp4"))
+    original = cv2.VideoCapture(str(source / "clip.mp4"))
+    hidden_seen = kept_seen = 0
+    for f in range(51):
+        frame, was = video.read()[1], original.read()[1]
+        if f < 36:
+            continue
+        px = np.round(camera.project(before["points"][f])).astype(int)
+        inside = (px[:, 0] >= 0) & (px[:, 0] < frame.shape[1]) & (px[:, 1] >= 0) & (px[:, 1] < frame.shape[0])
+        lit_before = np.zeros(len(px), bool)
+        lit_before[inside] = was[px[inside, 1], px[inside, 0]].max(axis=1) > 80
+        lit_after = np.zeros(len(px), bool)
+        lit_after[inside] = frame[px[inside, 1], px[inside, 0]].max(axis=1) > 80
+        hidden = before["visible"][f, 0] & ~after["visible"][f, 0] & lit_before
+        kept = after["visible"][f, 0] & lit_before
+        assert not lit_after[hidden].any()          # the sphere covers every dot the truth hides ...
+        assert lit_after[kept].mean() > 0.97         # ... and no other (a dot at its rim may dim)
+        hidden_seen += hidden.sum()
+        kept_seen += kept.sum()
+    assert hidden_seen > 50 and kept_seen > 500
+
+
 def test_a_rig_set_up_by_hand_self_calibrates_and_tracks(tmp_path, capsys):
     """Stop 45: every earlier clip had two upright mirrors at one angle each side of a head centred
     between them. askew720 (`make stress-clips`) is a rig set up by hand: mirrors at 38 and 50 deg,
