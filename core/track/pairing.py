@@ -370,3 +370,64 @@ def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack, held=None) ->
     first = order[np.r_[True, i[order][1:] != i[order][:-1]]]
     out[i[first]], out_held[i[first]] = c[first], longest[first]
     return out, out_held
+
+
+def continuing_owner(cont, cont_held, sl, min_held: int) -> np.ndarray:
+    """Per candidate of the frame's slice ``sl``, the marker whose own 2D tracks it continues
+    (:func:`continuing_candidate`: ``cont`` (N,), index of the clip's candidates, -1 none), where that
+    marker has held its mirror track ``min_held`` measurements (``cont_held``) and no other marker's tracks
+    lead there too; -1 elsewhere."""
+    owner = np.full(sl.stop - sl.start, -1)
+    mine = np.flatnonzero((cont >= 0) & (cont_held >= min_held))
+    if mine.size:
+        at = cont[mine] - sl.start
+        claims = np.bincount(at, minlength=owner.size)
+        owner[at] = mine
+        owner[claims > 1] = -1
+    return owner
+
+
+def direct_track_spans(det: ClipDetections, cands) -> tuple:
+    """The first and the last frame of each direct-view 2D track (the ids of :func:`blob_tracks`),
+    ``(start (T,), end (T,))``; computed once per clip."""
+    if "_spans" not in cands.__dict__:
+        ids = blob_tracks(det, cands)[0]
+        start = np.full(int(ids.max(initial=-1)) + 1, det.n_frames)
+        end = np.full(start.size, -1)
+        np.minimum.at(start, ids, det.frame[0])
+        np.maximum.at(end, ids, det.frame[0])
+        cands.__dict__["_spans"] = (start, end)
+    return cands.__dict__["_spans"]
+
+
+def back_on_mirror_track(mtrack, dtrack, last_mtrack, last_dtrack, held, last_frame, spans, t: int,
+                         min_held: int, min_lost: int) -> tuple:
+    """Markers whose direct dot was hidden while their mirror image was followed (a hand before the
+    mouth), and the frame ``t``'s candidates that bring them back: ``(markers, candidates)`` (index into
+    the frame's candidates), each candidate's blob in a mirror on the 2D track the marker held for
+    ``min_held`` measurements running (``last_mtrack``, ``held`` ``(N, K)``; no other marker holds it,
+    none claims the candidate through the other mirror), the marker lost for ``min_lost`` frames or more
+    since ``last_frame``, the direct track of its last measurement (``last_dtrack``) ended with it -- its
+    dot vanished -- and the candidate's direct blob on a track begun since (``spans``:
+    :func:`direct_track_spans`): the dot come back. ``mtrack`` ``(C, K)``, ``dtrack`` ``(C,)``: the
+    frame's candidates' 2D tracks (:func:`candidate_tracks`)."""
+    owner = np.full(len(mtrack), -1)
+    clash = np.zeros(len(mtrack), bool)
+    for k in range(mtrack.shape[1]):
+        holders = np.flatnonzero((last_mtrack[:, k] >= 0) & (held[:, k] >= min_held))
+        if not holders.size:
+            continue
+        tracks, first, count = np.unique(last_mtrack[holders, k], return_index=True, return_counts=True)
+        at = np.minimum(np.searchsorted(tracks, mtrack[:, k]), tracks.size - 1)
+        c = np.flatnonzero((mtrack[:, k] >= 0) & (tracks[at] == mtrack[:, k]) & (count[at] == 1))
+        who = holders[first[at[c]]]
+        clash[c] |= (owner[c] >= 0) & (owner[c] != who)
+        owner[c] = np.where(owner[c] >= 0, owner[c], who)
+    owner[clash] = -1
+    c = np.flatnonzero(owner >= 0)
+    o = owner[c]
+    start, end = spans
+    ok = ((t - 1 - last_frame[o] >= min_lost) & (last_dtrack[o] >= 0) & (end[np.maximum(last_dtrack[o], 0)] <= last_frame[o] + 2)
+          & (start[dtrack[c]] > last_frame[o]))
+    return o[ok], c[ok]
+

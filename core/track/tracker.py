@@ -20,7 +20,8 @@ Steps, per the procedure:
    marker's last measurement in the direct view and a mirror (:func:`.pairing.continuing_candidate`: the same
    dot, though it moves unlike its neighbours -- a lip against the chin), preferred to a nearer
    pairing of the same direct blob once the marker has held its mirror track ``HELD_FRAMES``
-   measurements; conflicts (one 2D blob claimed twice) keep the marker closest to its prediction;
+   measurements; a marker whose direct dot was hidden comes back on the mirror track it held
+   (:func:`.pairing.back_on_mirror_track`); conflicts (one 2D blob claimed twice) keep the marker closest to its prediction;
 7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
    whole take known, a gap that the marker's 2D tracks bracket is measured from its candidates
    (:func:`.bridge.bridge_gaps_along_2d_tracks`), dots are followed into the other gaps
@@ -54,7 +55,8 @@ from .late import (add_late_markers, lost_markers, merge_along_2d_tracks, merge_
 from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
 from .motion import (ConstantVelocityKalman, conjecture_motion, conjecture_since_last_seen, false_tracking,
                      neighbours)
-from .pairing import candidate_tracks, continuing_candidate, direct_track_frames, paired_tracks, partner_blobs
+from .pairing import (back_on_mirror_track, candidate_tracks, continuing_candidate, continuing_owner,
+                      direct_track_frames, direct_track_spans, paired_tracks, partner_blobs)
 from .relocate import (RELOCATE_CONFLICT_SHARE, RELOCATE_CONFLICTS, RELOCATE_DROP, RELOCATE_MIN_MARKERS, on_candidates,
                        relocate_head)
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, camera_mask_of, keep_measured
@@ -71,6 +73,11 @@ HELD_FRAMES = 5
 #: re-acquired 20 frames later) and wide576 6 -> 14 points over 2 mm
 LOST_GATE_AFTER = 5
 LOST_GATE_GROWTH_MM = 0.02
+#: a marker back from behind an object in the direct view, on the mirror track it held, may be this many widest
+#: gates from its prediction (.pairing.back_on_mirror_track). Measured with a sphere swept before the face
+#: (make occluded-clips): fast720_hand 31 -> 0 switches, tempo720_hand 3 -> 0, lip648 1 -> 0; the 66 other clips
+#: as before (the gate alone: no change; no distance limit: tempo720_hand 3 -> 80 switches)
+REACQUIRE_GATE_FACTOR = 3.0
 
 
 def _undecided(det: ClipDetections, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
@@ -338,21 +345,6 @@ def rigid_by_image(camera: Camera, neutral, colour, region=None, colours=None) -
     return np.flatnonzero(ok)
 
 
-def _continuing_owner(cont, cont_held, sl) -> np.ndarray:
-    """Per candidate of the frame's slice ``sl``, the marker whose own 2D tracks it continues
-    (:func:`.pairing.continuing_candidate`: ``cont`` (N,), index of the clip's candidates, -1 none), where that
-    marker has held its mirror track :data:`HELD_FRAMES` measurements (``cont_held``) and no other marker's tracks
-    lead there too; -1 elsewhere."""
-    owner = np.full(sl.stop - sl.start, -1)
-    mine = np.flatnonzero((cont >= 0) & (cont_held >= HELD_FRAMES))
-    if mine.size:
-        at = cont[mine] - sl.start
-        claims = np.bincount(at, minlength=owner.size)
-        owner[at] = mine
-        owner[claims > 1] = -1
-    return owner
-
-
 def _resolve_conflicts(a, near, keys):
     """Conflicts (procedure step 6): a 2D blob -- direct, or in a mirror -- claimed by
     two markers in one frame stays with the marker closest to its prediction.
@@ -411,6 +403,7 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
     trees = {}
     # 2D continuity: each candidate's direct and mirror blobs' 2D tracks (.pairing.track_2d)
     cand_dtrack, cand_mtrack = candidate_tracks(det, cands) if s.follow_2d_tracks else (None, None)
+    spans = direct_track_spans(det, cands) if s.follow_2d_tracks else None
     last_dtrack = np.full(N, -1)
     last_mtrack = np.full((N, K), -1)
     held = np.zeros((N, K), int)   # measurements running on each last mirror track
@@ -454,8 +447,18 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 # dot: a marker coasting through a gap of its own does not take it, its owner does (side600: a dot
                 # moving 5 px in 3 frames at the silhouette coasted 10 px onto its neighbour's dot, 11 mm away,
                 # while the neighbour, its step along the line of sight, was lost)
-                owner = _continuing_owner(cont, cont_held, sl)
+                owner = continuing_owner(cont, cont_held, sl, HELD_FRAMES)
                 taken = np.flatnonzero(valid & ~confirmed & (last_frame >= 0) & (last_frame < t - 1))
+                # a marker whose direct dot was hidden (a hand before the mouth) and whose mirror image was followed
+                # all along comes back to a candidate on that mirror track, its direct dot new since, within
+                # REACQUIRE_GATE_FACTOR gates of its prediction: a fast mouth outruns the conjecture while hidden
+                o, c = back_on_mirror_track(cand_mtrack[sl], cand_dtrack[sl], last_mtrack, last_dtrack, held, last_frame,
+                                            spans, t, HELD_FRAMES, LOST_GATE_AFTER)
+                gap = np.linalg.norm(cand_key[c + sl.start] - query[o], axis=1)
+                back_on = ~valid[o] & (entry[o] <= t) & (gap <= REACQUIRE_GATE_FACTOR * s.gate_mm)
+                order = np.argsort(-gap[back_on])            # a marker's nearest such candidate is assigned last
+                o, c = o[back_on][order], c[back_on][order] + sl.start
+                a[o], near[o], valid[o] = c, gap[back_on][order], True
                 claim = owner[a[taken] - sl.start]
                 other_s = (claim >= 0) & (claim != taken)
                 stolen, owners = taken[other_s], claim[other_s]
