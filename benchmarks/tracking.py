@@ -214,7 +214,8 @@ def _scored(truth, camera, path) -> tuple:
 
 def run_stress_clip_benchmark(clips=None, repeats: int = 2, progress=print) -> dict:
     """The whole ``mirrorcap track`` (mirrors self-calibrated, RIG.json's views) on each rendered
-    stress clip (``make stress-clips``, ``normal-clips``, ``compressed-clips``, ``occluded-clips``), ``repeats`` times: speed, and accuracy and completeness
+    stress clip (``make stress-clips``, ``normal-clips``, ``compressed-clips``, ``occluded-clips``),
+    ``repeats`` times: speed, and accuracy and completeness
     against the clip's truth -- RMS / p95 / max after one similarity, identity switches, markers
     split over two labels, and the share of the marker-frames seen in the direct view and a
     mirror (truth.npz ``visible``) that the take reports. A clip the product refuses is recorded with

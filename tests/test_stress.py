@@ -382,7 +382,8 @@ def test_the_clip_maker_blurs_motion_over_the_open_shutter():
         assert np.array_equal(disp_at[1], twice[79])
         assert np.abs(disp_at[1] - disp[39]).max() > 0.1 and np.abs(disp_at[1] - disp[40]).max() > 0.1
         # a smear is light averaged, not sRGB values: a dot lit half the exposure is 188 of 255, not 128
-        half = module.linear_to_srgb((module.srgb_to_linear(np.array([1.0])) + module.srgb_to_linear(np.array([0.0]))) / 2)
+        lit, dark = module.srgb_to_linear(np.array([1.0])), module.srgb_to_linear(np.array([0.0]))
+        half = module.linear_to_srgb((lit + dark) / 2)
         assert round(float(half[0]) * 255) == 188
         assert module.paint_linear((255, 110, 200)) == pytest.approx([((c / 255 + 0.055) / 1.055) ** 2.4
                                                                       for c in (255, 110, 200)])

@@ -427,7 +427,7 @@ def back_on_mirror_track(mtrack, dtrack, last_mtrack, last_dtrack, held, last_fr
     c = np.flatnonzero(owner >= 0)
     o = owner[c]
     start, end = spans
-    ok = ((t - 1 - last_frame[o] >= min_lost) & (last_dtrack[o] >= 0) & (end[np.maximum(last_dtrack[o], 0)] <= last_frame[o] + 2)
-          & (start[dtrack[c]] > last_frame[o]))
+    vanished = (last_dtrack[o] >= 0) & (end[np.maximum(last_dtrack[o], 0)] <= last_frame[o] + 2)
+    ok = (t - 1 - last_frame[o] >= min_lost) & vanished & (start[dtrack[c]] > last_frame[o])
     return o[ok], c[ok]
 

@@ -21,7 +21,8 @@ Steps, per the procedure:
    dot, though it moves unlike its neighbours -- a lip against the chin), preferred to a nearer
    pairing of the same direct blob once the marker has held its mirror track ``HELD_FRAMES``
    measurements; a marker whose direct dot was hidden comes back on the mirror track it held
-   (:func:`.pairing.back_on_mirror_track`); conflicts (one 2D blob claimed twice) keep the marker closest to its prediction;
+   (:func:`.pairing.back_on_mirror_track`); conflicts (one 2D blob claimed twice) keep the marker closest to its
+   prediction;
 7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
    whole take known, a gap that the marker's 2D tracks bracket is measured from its candidates
    (:func:`.bridge.bridge_gaps_along_2d_tracks`), dots are followed into the other gaps
@@ -452,13 +453,13 @@ def _track_pass(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, ma
                 # a marker whose direct dot was hidden (a hand before the mouth) and whose mirror image was followed
                 # all along comes back to a candidate on that mirror track, its direct dot new since, within
                 # REACQUIRE_GATE_FACTOR gates of its prediction: a fast mouth outruns the conjecture while hidden
-                o, c = back_on_mirror_track(cand_mtrack[sl], cand_dtrack[sl], last_mtrack, last_dtrack, held, last_frame,
-                                            spans, t, HELD_FRAMES, LOST_GATE_AFTER)
-                gap = np.linalg.norm(cand_key[c + sl.start] - query[o], axis=1)
-                back_on = ~valid[o] & (entry[o] <= t) & (gap <= REACQUIRE_GATE_FACTOR * s.gate_mm)
-                order = np.argsort(-gap[back_on])            # a marker's nearest such candidate is assigned last
+                o, c = back_on_mirror_track(cand_mtrack[sl], cand_dtrack[sl], last_mtrack, last_dtrack, held,
+                                            last_frame, spans, t, HELD_FRAMES, LOST_GATE_AFTER)
+                reach = np.linalg.norm(cand_key[c + sl.start] - query[o], axis=1)
+                back_on = ~valid[o] & (entry[o] <= t) & (reach <= REACQUIRE_GATE_FACTOR * s.gate_mm)
+                order = np.argsort(-reach[back_on])          # a marker's nearest such candidate is assigned last
                 o, c = o[back_on][order], c[back_on][order] + sl.start
-                a[o], near[o], valid[o] = c, gap[back_on][order], True
+                a[o], near[o], valid[o] = c, reach[back_on][order], True
                 claim = owner[a[taken] - sl.start]
                 other_s = (claim >= 0) & (claim != taken)
                 stolen, owners = taken[other_s], claim[other_s]
