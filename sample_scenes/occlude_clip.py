@@ -35,7 +35,7 @@ sys.path.insert(0, str(HERE))
 
 from mirrorcap.core.geometry.camera import Camera  # noqa: E402
 from mirrorcap.core.geometry.mirror import reflect_points  # noqa: E402
-from reencode_clip import encode_frames, read_frames  # noqa: E402
+from reencode_clip import encode_frames, fail, read_frames  # noqa: E402
 
 LOWER_FACE_SHARE = 0.3     # the sphere runs in front of the lowest 30 % of the markers (mouth and chin)
 SPHERE_BGR = (24, 12, 18)  # skin or a foam cover, dimly lit by the black light
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
     try:
         frames, width, height = read_frames(args.source / "clip.mp4", work)
         if frames != len(points):
-            raise SystemExit(f"error: the video holds {frames} frames and the truth {len(points)}")
+            fail(f"the video holds {frames} frames and the truth {len(points)}")
         for f in range(first, last + 1):
             png = work / f"frame_{f:04d}.png"
             image = cv2.imread(str(png))

@@ -22,13 +22,19 @@ from pathlib import Path
 CRF = {"HIGH": 20, "MEDIUM": 23, "LOW": 26, "VERYLOW": 29, "LOWEST": 32}
 
 
+def fail(message: str):
+    """One ``error:`` line on stderr and exit status 2, as the product's commands end on bad input."""
+    print(f"error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def read_frames(video: Path, work: Path) -> tuple[int, int, int]:
     """Every frame of ``video`` as ``work/frame_NNNN.png``; returns (frames, width, height)."""
     import cv2
 
     capture = cv2.VideoCapture(str(video))
     if not capture.isOpened():
-        raise SystemExit(f"error: cannot read {video}")
+        fail(f"cannot read {video}")
     frames, width, height = 0, 0, 0
     while True:
         ok, image = capture.read()
@@ -38,7 +44,7 @@ def read_frames(video: Path, work: Path) -> tuple[int, int, int]:
         height, width = image.shape[:2]
         frames += 1
     if frames == 0:
-        raise SystemExit(f"error: no frame in {video}")
+        fail(f"no frame in {video}")
     return frames, width, height
 
 

@@ -3,7 +3,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import importlib.util
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -298,24 +301,28 @@ def test_the_head_motion_link_matches_the_shared_marker_link_and_refuses_a_still
         link_mirror_scales_by_motion(shuffled, camera, normals, ds)
 
 
+@contextlib.contextmanager
+def _sample_script(name):
+    """The script ``sample_scenes/<name>.py`` loaded as a module (its functions under test), unloaded after."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "sample_scenes" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop(name, None)
+
+
 def test_the_clip_makers_view_split_puts_the_fewest_dots_in_the_wrong_view():
     """sample_scenes/make_rig_clip.py's view lines (the mirror45 and dense clips' views had been cut at
     the mirror panels' edges, through the face): each line is where the fewest of one view's dots land
     on the other's side, in the middle of the widest such stretch."""
-    import importlib.util
-    import sys
-
-    spec = importlib.util.spec_from_file_location("make_rig_clip", ROOT / "sample_scenes" / "make_rig_clip.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["make_rig_clip"] = module
-    try:
-        spec.loader.exec_module(module)
+    with _sample_script("make_rig_clip") as module:
         split = module._best_split
         assert split(np.array([1.0, 2, 3]), np.array([5.0, 6, 7])) == 4.0        # a clean gap: its middle
         assert split(np.array([1.0, 2, 5.5]), np.array([5.0, 6, 7])) == 3.5      # one dot astray either way:
         assert split(np.array([1.0, 2, 5.5, 5.6]), np.array([5.0, 6, 7])) == pytest.approx(5.8)  # fewest astray
-    finally:
-        sys.modules.pop("make_rig_clip", None)
 
 
 def test_the_clip_maker_sets_up_rigs_by_hand():
@@ -323,14 +330,7 @@ def test_the_clip_maker_sets_up_rigs_by_hand():
     and tilt (``--mirror-deg L0 L1``, ``--mirror-tilt``); each mirror panel lies in its plane and still
     spans the face's height where the plane touches the sphere around it; the default rig is the
     symmetric one of the committed clips."""
-    import importlib.util
-    import sys
-
-    spec = importlib.util.spec_from_file_location("make_rig_clip", ROOT / "sample_scenes" / "make_rig_clip.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["make_rig_clip"] = module
-    try:
-        spec.loader.exec_module(module)
+    with _sample_script("make_rig_clip") as module:
         (n0, d0), (n1, d1) = module.rig_planes(module.ClipSpec(mirror_longitude_deg=41.0))
         assert n0 == pytest.approx(n1 * np.array([-1.0, 1.0, 1.0])) and d0 == pytest.approx(d1)   # symmetric
         assert n0[1] == 0.0 and np.degrees(np.arctan2(n1[0], -n1[2])) == pytest.approx(-41.0)
@@ -345,8 +345,6 @@ def test_the_clip_maker_sets_up_rigs_by_hand():
             up = panel[3] - panel[0]
             height = (touch - panel[0]) @ up / (up @ up)
             assert 0.3 < height < 0.7                                            # the face's height on the panel
-    finally:
-        sys.modules.pop("make_rig_clip", None)
 
 
 def test_the_clip_maker_blurs_motion_over_the_open_shutter():
@@ -354,17 +352,10 @@ def test_the_clip_maker_blurs_motion_over_the_open_shutter():
     performance spread over the S of the frame interval around the frame's moment (a real camera's
     exposure). The moments between frames come from the same continuous head motion and expressions
     (``at``), and the default (no blur) is the clip of before."""
-    import importlib.util
-    import sys
-
     from mirrorcap.core.face.headio import load_head_npz
     from mirrorcap.synthetic.headsim import performance
 
-    spec = importlib.util.spec_from_file_location("make_rig_clip", ROOT / "sample_scenes" / "make_rig_clip.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["make_rig_clip"] = module
-    try:
-        spec.loader.exec_module(module)
+    with _sample_script("make_rig_clip") as module:
         rig = module.ClipSpec(head_deg=(10.0, 14.0, 5.0), head_turn_deg=(0.0, 8.0, 0.0), head_offset_mm=(10.0, 0.0))
         R, t = module.head_pose(rig, 90, 461)
         R_at, t_at = module.head_pose(rig, 90, 461, at=np.arange(90.0))
@@ -387,8 +378,6 @@ def test_the_clip_maker_blurs_motion_over_the_open_shutter():
         assert round(float(half[0]) * 255) == 188
         assert module.paint_linear((255, 110, 200)) == pytest.approx([((c / 255 + 0.055) / 1.055) ** 2.4
                                                                       for c in (255, 110, 200)])
-    finally:
-        sys.modules.pop("make_rig_clip", None)
 
 
 def test_an_object_passed_before_the_face_hides_the_dots_the_truth_says(tmp_path):
@@ -396,22 +385,13 @@ def test_an_object_passed_before_the_face_hides_the_dots_the_truth_says(tmp_path
     What the picture shows and what the truth says agree: every marker the truth newly hides in the
     direct view has the sphere over its dot in the frame, every marker it keeps has its dot still lit
     there, and outside the sphere's frames nothing changes."""
-    import importlib.util
-    import sys
-
     import cv2
 
     from mirrorcap.core.geometry.camera import Camera
 
     source = ROOT / "sample_scenes" / "stress" / "webcam"
-    spec = importlib.util.spec_from_file_location("occlude_clip", ROOT / "sample_scenes" / "occlude_clip.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["occlude_clip"] = module
-    try:
-        spec.loader.exec_module(module)
+    with _sample_script("occlude_clip") as module:
         assert module.main([str(source), str(tmp_path / "hand"), "--frames", "30", "50", "--radius-mm", "30"]) == 0
-    finally:
-        sys.modules.pop("occlude_clip", None)
     before, after = np.load(source / "truth.npz"), np.load(tmp_path / "hand" / "truth.npz")
     assert np.array_equal(before["points"], after["points"])
     assert np.array_equal(before["visible"][:30], after["visible"][:30])
