@@ -15,7 +15,7 @@ from ..capture.views import ClipDetections, frame_spaced
 from .candidates import ClipCandidates
 from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
 from .onface import along_ray, beyond, face_offset, off_in_mirrors, off_the_face
-from .pairing import candidate_tracks
+from .pairing import candidate_tracks, chain_pairing_support
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, keep_measured
 
 
@@ -56,7 +56,8 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     within ``same_ray_px`` of its image (its direct blob, paired with a wrong mirror
     blob), is that marker found again and is not added; nor is one whose neutral
     position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
-    blob with a better supported chain, nor one off the face: more than ``off_face_mm`` along its
+    blob with a chain on a better supported pairing of 2D tracks (:func:`.pairing.chain_pairing_support`; a chain
+    that shares blobs with chains kept on worse supported pairings replaces them), nor one off the face: more than ``off_face_mm`` along its
     ray, where it is first seen, from the surface through the markers measured then
     (:func:`.onface.off_the_face`; a direct blob paired with another marker's mirror image lands
     along its ray, typically ~45 mm away) *and*, with the mirrors' ``planes`` ``(normals (K, 3),
@@ -126,11 +127,11 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     good = good[near_existing[good] < 0.5 * np.bincount(comp[member], minlength=n_comp)[good]]
     if good.size == 0:
         return markers
-    # one blob is one marker: chains sharing a blob (a marker's chain and its chance
-    # pairings with another unclaimed blob) compete, and the best supported one wins
+    # one blob is one marker: chains sharing a blob (a marker's chain and its chance pairings with another
+    # unclaimed blob) compete, and the one on the best supported pairing of 2D tracks wins
     cand_of = idx[member]
     blob_keys = [cands.direct[cand_of]] + [cands.mirror_blob[cand_of, k] for k in range(K)]
-    used = [np.zeros(len(det.frame[v]), bool) for v in range(K + 1)]
+    used = [np.full(len(det.frame[v]), -1) for v in range(K + 1)]     # the kept chain that holds each blob
     by_chain = np.argsort(comp[member], kind="stable")
     bounds = np.searchsorted(comp[member][by_chain], np.arange(n_comp + 1))
     order = np.lexsort((np.arange(idx.size), f, comp))
@@ -146,13 +147,27 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     # one dot in the direct view is one marker: a chain on the direct 2D tracks of a chain kept, resting
     # elsewhere (further than same_marker_mm), paired its dot with another mirror blob -- of the two, the one
     # nearer the face is kept (a dot paired with a like dot's grazing image lands 5-9 mm along its ray)
-    direct_track = candidate_tracks(det, cands)[0]
+    direct_track, mirror_track = candidate_tracks(det, cands)
     owner = np.full(int(direct_track.max(initial=-1)) + 1, -1)          # the kept chain on each direct track
     face_off, blobs_of = {}, {}
+    paired = chain_pairing_support(good, support, [by_chain[bounds[c]:bounds[c + 1]] for c in good],
+                              direct_track[cand_of], mirror_track[cand_of])
+
+    def drop(kept):
+        keep.remove(kept)
+        del seen_from[kept]
+        for v, b in enumerate(blobs_of[kept]):
+            used[v][b[b >= 0]] = -1
+        owner[owner == kept] = -1
+
     for c in good[np.argsort(-support[good], kind="stable")]:  # the chains left (tens), best supported first
         rows = by_chain[bounds[c]:bounds[c + 1]]
         blobs = [key[rows] for key in blob_keys]
-        if any(used[v][b[b >= 0]].any() for v, b in enumerate(blobs)):
+        # a blob is one marker's: of two chains that share blobs, the one on the better supported pairing of 2D
+        # tracks stays (:func:`.pairing.chain_pairing_support`)
+        holders = np.unique(np.concatenate([used[v][b[b >= 0]] for v, b in enumerate(blobs)]))
+        holders = holders[holders >= 0].tolist()
+        if holders and not all(paired[c] > paired[h] for h in holders):
             continue
         if real.any() and np.min(np.linalg.norm(neutral[real] - at_rest[c], axis=1)) <= same_marker_mm:
             continue
@@ -165,12 +180,14 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
                 planes is None or off_in_mirrors(first_pass.points[f[q]], views_then, point,
                                                   cands.mirror_blob[idx[q]] >= 0, planes, off_face_mm)):
             continue
-        if keep:
-            gap = np.linalg.norm(at_rest[keep] - at_rest[c], axis=1)
+        others = [k for k in keep if k not in holders]
+        if others:
+            gap = np.linalg.norm(at_rest[others] - at_rest[c], axis=1)
             if gap.min() <= same_marker_mm:  # another stretch of a marker kept: it is seen from then
-                same = keep[int(np.argmin(gap))]
+                same = others[int(np.argmin(gap))]
                 if first_f[c] < seen_from[same] and gap.min() <= REST_AGREE_MM:
-                    at_rest[same] = at_rest[c]      # ... and where it rests is read nearer the neutral frame
+                    at_rest[same] = at_rest[c]      # ... and where it rests is read nearer the neutral frame,
+                    face_off[same] = offset[0]      # and how far off the face it lies (for its rivals)
                 seen_from[same] = min(seen_from[same], first_f[c])
                 continue
         tracks_c = direct_track[cand_of[rows]]
@@ -179,13 +196,12 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
         if rival >= 0:
             if not face_off[c] + RIVAL_NEARER_MM < face_off[rival]:     # NaN: the rival stays
                 continue
-            keep.remove(rival)                                         # the rival was the wrong pairing
-            del seen_from[rival]
-            for v, b in enumerate(blobs_of[rival]):
-                used[v][b[b >= 0]] = False
-            owner[owner == rival] = -1
+            drop(rival)                                                # the rival was the wrong pairing
+        for held in holders:
+            if held in keep:
+                drop(held)                                             # the weaker pairing of c's blobs
         for v, b in enumerate(blobs):
-            used[v][b[b >= 0]] = True
+            used[v][b[b >= 0]] = c
         owner[tracks_c] = c
         blobs_of[c] = blobs
         keep.append(c)

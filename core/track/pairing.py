@@ -431,3 +431,24 @@ def back_on_mirror_track(mtrack, dtrack, last_mtrack, last_dtrack, held, last_fr
     ok = (t - 1 - last_frame[o] >= min_lost) & vanished & (start[dtrack[c]] > last_frame[o])
     return o[ok], c[ok]
 
+
+def chain_pairing_support(chains, support, rows, direct_track, mirror_track) -> dict:
+    """Per late chain (:func:`.late.add_late_markers`) of ``chains``, the support of its pairing of 2D tracks: the frames (``support``) of all the
+    chains that pair the same direct track with the same track in a mirror (each chain's tracks: the most
+    frequent among its candidates ``rows``; the best of its mirrors). Two like dots on one mirrored epipolar
+    line and their two images on another (one a grazing image): both ways of pairing them sit in the band, but
+    where a chance pairing's rays meet slides as the head turns, so its chains break and stay short, while the
+    true pairing chains on (ruddy540: a dot's chains with the other's image 45 frames, with its own 54; the
+    other dot's 34 with the first's image and 72 with its own)."""
+    def most(values):
+        values = values[values >= 0]
+        return int(np.bincount(values).argmax()) if values.size else -1
+
+    keys = {c: [(k, most(direct_track[r]), most(mirror_track[r, k])) for k in range(mirror_track.shape[1])]
+            for c, r in zip(chains, rows)}
+    total = {}
+    for c, ks in keys.items():
+        for key in ks:
+            if key[2] >= 0:
+                total[key] = total.get(key, 0) + int(support[c])
+    return {c: max((total[k] for k in ks if k[2] >= 0), default=0) for c, ks in keys.items()}
