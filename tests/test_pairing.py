@@ -196,3 +196,43 @@ def test_a_2d_track_through_two_merged_dots_is_cut_where_they_come_apart(rig):
     det2, ids2 = _merge_split_clip(rig, colour_b=1)
     assert np.array_equal(cut_at_splits(det2, 0, ids2, 5.0), ids2)
     assert np.array_equal(cut_at_splits(det, 0, ids, 1.0), ids)  # born further off than the radius
+
+
+def test_one_mirror_image_on_the_line_of_two_like_dots_is_contested(rig):
+    """#18, stop 47: two like dots on one mirrored epipolar line (the nose tip and the dot beside it, at one
+    height, mirrors to the sides) and one image on it, the first dot's (the second's own is hidden). Both pairs
+    sit in the band every frame and each dot has no other partner, so the direct side's ambiguity test passes
+    them and the one-to-one assignment gives the image to whichever lies a shade nearer the line -- on a blurred
+    clip under normal light (blur540n), the wrong one. The image is reported contested, with both dots
+    (TrackPairs.contested; the tracker settles it through the other mirror); alone, or beside a dot of another
+    colour, the first dot pairs with it uncontested."""
+    from mirrorcap.core.capture.views import FrameDets
+    from mirrorcap.core.geometry.mirror import reflect_points
+
+    normal, d = rig.planes[0]
+    epipole = rig.camera.project(np.asarray(normal, float)[None] * 1e6)[0]   # the image of the mirror's normal
+
+    def clip(second_colour=None):
+        frames = []
+        for f in range(15):
+            dot = np.array([10.0 + 0.4 * f, -5.0 + 0.2 * f, 600.0])
+            a = rig.camera.project(dot[None])[0]
+            image = rig.camera.project(reflect_points(dot[None], normal, d))
+            along = (a - epipole) / np.linalg.norm(a - epipole)
+            xy, colour = [a], [0]
+            if second_colour is not None:                       # 30 px further along the line through the image
+                xy, colour = xy + [a + 30.0 * along], colour + [second_colour]
+            frames.append(FrameDets(np.array(xy), np.array(colour), [image, np.zeros((0, 2))],
+                                    [np.zeros(1, int), np.zeros(0, int)]))
+        det = ClipDetections.from_frames(frames, rig.camera)
+        dids = track_2d(det.per_frame(0), det.per_frame(0, "colour"))[0]
+        mids = track_2d(det.per_frame(1), det.per_frame(1, "colour"))[0]
+        return pair_tracks(det, dids, 0, mids, rig.camera, MirrorPlane(normal=np.asarray(normal, float), d=d)), dids
+
+    both, dids = clip(second_colour=0)
+    dots = sorted({int(t) for t in dids[0]})
+    assert sorted(both.contested[:, 0].tolist()) == dots and len(set(both.contested[:, 1].tolist())) == 1
+    assert both.direct_track.size == 1                          # the assignment stands: the tracker settles it
+    for alone in (clip(), clip(second_colour=1)):
+        pairs, dids = alone
+        assert pairs.direct_track.tolist() == [int(dids[0][0])] and pairs.contested.size == 0

@@ -127,12 +127,12 @@ def test_markers_that_cannot_be_decided_are_reported(performance):
     # the first frames' pairing leaves both undecided, the twin as ambiguous in mirror 0
     from mirrorcap.core.capture.views import ClipDetections
     from mirrorcap.core.track.pairing import paired_tracks
-    from mirrorcap.core.track.tracker import _undecided
+    from mirrorcap.core.track.initial import undecided_tracks
 
     normals = np.stack([n for n, _ in rig.planes])
     first_frames = ClipDetections.from_frames(edited[:15], rig.camera)
     dids, n_dt, partner, _, ambiguous, _ = paired_tracks(first_frames, rig.camera, normals, 1.0, 5)
-    first = _undecided(first_frames, dids, n_dt, partner, ambiguous, 5)
+    first = undecided_tracks(first_frames, dids, n_dt, partner, ambiguous, 5)
     track_of = {m: dids[0][np.flatnonzero(np.asarray(frames[0].direct_id) == m)[0]] for m in (lost, twin)}
     assert set(first["track"].tolist()) == set(track_of.values())
     amb = dict(zip(first["track"].tolist(), first["ambiguous_in"].tolist()))

@@ -27,6 +27,11 @@ from ..geometry.epipolar import lines_of_normalised
 from ..geometry.mirror import MirrorPlane
 from .candidates import spans
 
+#: a mirror track that is the only partner of two direct tracks of comparable support is contested (TrackPairs)
+#: when they sit in its band within this ratio of each other's RMS residual: blur540n's nose-tip dot and the like
+#: dot beside it at one height, 0.25 and 0.32 px (the wrong one nearer); where the nearer is right, 1.5-5x apart
+CONTEST_RMS_RATIO = 1.3
+
 
 def track_2d(positions, colors, gate_px: float = 8.0, max_gap: int = 2):
     """Link detections of one view over frames.
@@ -93,6 +98,10 @@ class TrackPairs:
     rms_px: np.ndarray  # (P,) band residual over the frames they were paired
     support: np.ndarray  # (P,) frames in which the pair sat in the band
     ambiguous: np.ndarray  # direct tracks with more than one plausible partner, left unpaired
+    qualifying: np.ndarray = None  # (Q, 2) every (direct track, mirror track) pair that qualified, before the above
+    contested: np.ndarray = None  # (R, 2) the qualifying pairs of mirror tracks that are the only partner of two
+    # direct tracks or more, of comparable support and residual (CONTEST_RMS_RATIO): which dot the image shows, the
+    # band cannot tell (the assignment gives it to the one a shade nearer its line)
 
 
 def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera: Camera, plane: MirrorPlane,
@@ -130,7 +139,7 @@ def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera
         sq.append(dist[i, j] ** 2)
     if not keys:
         empty = np.zeros(0, int)
-        return TrackPairs(empty, empty, np.zeros(0), empty, empty)
+        return TrackPairs(empty, empty, np.zeros(0), empty, empty, np.zeros((0, 2), int), np.zeros((0, 2), int))
     keys = np.concatenate(keys)
     sq = np.concatenate(sq)
     uk, inv = np.unique(keys, return_inverse=True)
@@ -145,21 +154,16 @@ def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera
         close = rms <= max_rms_factor * np.median(rms)
         dt, mt, rms, support = dt[close], mt[close], rms[close], support[close]
     # ambiguity: a rival partner with comparable support (best and second best per direct track)
-    order = np.lexsort((-support, dt))
-    ds_sorted, sup_sorted = dt[order], support[order]
-    starts = np.flatnonzero(np.r_[True, ds_sorted[1:] != ds_sorted[:-1]])
-    sizes = np.diff(np.r_[starts, ds_sorted.size])
-    rival = sizes > 1
-    if ds_sorted.size:
-        second = sup_sorted[np.minimum(starts + 1, ds_sorted.size - 1)]
-        ambiguous = ds_sorted[starts][rival & (second > ambiguity_ratio * sup_sorted[starts])]
-    else:
-        ambiguous = np.zeros(0, int)
+    ambiguous = _rivalled(dt, support, ambiguity_ratio)
+    sole = np.bincount(dt, minlength=int(dt.max(initial=-1)) + 1)[dt] == 1
+    contested_tracks = _rivalled(mt[sole], support[sole], ambiguity_ratio, rms[sole], CONTEST_RMS_RATIO)
+    on = sole & np.isin(mt, contested_tracks)
+    qualifying, contested = np.c_[dt, mt], np.c_[dt[on], mt[on]]
     keep = ~np.isin(dt, ambiguous)
     dt, mt, rms, support = dt[keep], mt[keep], rms[keep], support[keep]
     if dt.size == 0:
         empty = np.zeros(0, int)
-        return TrackPairs(empty, empty, np.zeros(0), empty, ambiguous)
+        return TrackPairs(empty, empty, np.zeros(0), empty, ambiguous, qualifying, contested)
     ud, dinv = np.unique(dt, return_inverse=True)
     um, minv = np.unique(mt, return_inverse=True)
     cost = np.full((ud.size, um.size), 1e9)
@@ -169,7 +173,28 @@ def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera
     index = np.full(cost.shape, -1)
     index[dinv, minv] = np.arange(dt.size)
     pick = index[r[good], c[good]]  # rows come sorted, so pairs stay in direct-track order
-    return TrackPairs(dt[pick], mt[pick], rms[pick], support[pick], ambiguous)
+    return TrackPairs(dt[pick], mt[pick], rms[pick], support[pick], ambiguous, qualifying, contested)
+
+
+def _rivalled(tracks, support, ratio: float, rms=None, rms_ratio: float = np.inf) -> np.ndarray:
+    """Of the qualifying pairs' ``tracks`` (one view's), those whose second-best partner has more than ``ratio``
+    of the best one's ``support`` -- and, with ``rms``, whose partners of such support sit in the band nearly as
+    closely as each other: the second-closest within ``rms_ratio`` times the closest's RMS residual."""
+    order = np.lexsort((-support, tracks))
+    by_track, sup_sorted = tracks[order], support[order]
+    if by_track.size == 0:
+        return np.zeros(0, int)
+    starts = np.flatnonzero(np.r_[True, by_track[1:] != by_track[:-1]])
+    sizes = np.diff(np.r_[starts, by_track.size])
+    second = sup_sorted[np.minimum(starts + 1, by_track.size - 1)]
+    rival = (sizes > 1) & (second > ratio * sup_sorted[starts])
+    if rms is not None:
+        group = np.repeat(np.arange(starts.size), sizes)
+        r = np.where(sup_sorted > ratio * sup_sorted[starts][group], rms[order], np.inf)  # comparable support
+        by_rms = np.lexsort((r, group))
+        lowest, next_lowest = r[by_rms[starts]], r[by_rms[np.minimum(starts + 1, by_track.size - 1)]]
+        rival &= next_lowest < rms_ratio * lowest
+    return by_track[starts][rival]
 
 
 def _presence(ids_per_frame):
@@ -186,7 +211,7 @@ def _presence(ids_per_frame):
 
 
 def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float = 1.0, min_frames: int = 5,
-                  max_rms_factor: float = 2.0, tracks=None):
+                  max_rms_factor: float = 2.0, tracks=None, detail: dict | None = None):
     """2D tracks of the direct view and of each mirror over the frames of ``det``, and each
     direct track's partner track per mirror (:func:`pair_tracks`; the band depends only on
     the mirrors' ``normals`` ``(K, 3)``, eq. 5.2). Returns ``(direct ids per frame, number of
@@ -194,7 +219,8 @@ def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float =
     tracks with rival partners in that mirror, rms_px (K, n): each pair's band residual)``.
     ``max_rms_factor``: :func:`pair_tracks`'s RMS test (``inf``: none). ``tracks``: the
     ``(direct ids, number of direct tracks, mirror ids)`` of an earlier call on the same ``det``,
-    to pair them again (another band) without linking them again."""
+    to pair them again (another band) without linking them again. ``detail``: a dict that gets, per mirror,
+    :class:`TrackPairs`' ``qualifying`` and ``contested`` pairs (lists under those keys)."""
     if tracks is None:
         dids, n_dt = track_2d(det.per_frame(0), det.per_frame(0, "colour"))
         given = None
@@ -213,6 +239,9 @@ def paired_tracks(det: ClipDetections, camera: Camera, normals, band_px: float =
         rms_px[k, pairs.direct_track] = pairs.rms_px
         ambiguous[k, pairs.ambiguous] = True
         mids_all.append(mids)
+        if detail is not None:
+            detail.setdefault("qualifying", []).append(pairs.qualifying)
+            detail.setdefault("contested", []).append(pairs.contested)
     return dids, n_dt, partner, mids_all, ambiguous, rms_px
 
 

@@ -1,0 +1,188 @@
+"""The neutral structure (Lin 2003, the motion tracking procedure, step 2): markers are direct-view 2D
+tracks paired with mirror tracks over the first frames (:mod:`.pairing`); a mirror image that two like dots on its
+line contest goes to the one the other mirror confirms (:func:`_settle_contests`); a direct track left unpaired is
+paired in a wider band when both mirrors put it at the same 3D point (:func:`_confirm_by_both_mirrors`); the
+tracks paired in no mirror are reported (:func:`undecided_tracks`)."""
+
+from __future__ import annotations
+
+import functools
+import warnings
+
+import numpy as np
+
+from ..common.errors import DegenerateError
+from ..geometry.mirror import points_from_planes
+from ..geometry.rigid import robust_rigid_fit
+from ..capture.views import ClipDetections
+from .pairing import paired_tracks, partner_blobs
+from .seeds import seeded_tracks
+
+
+def undecided_tracks(det: ClipDetections, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
+    """Direct-view tracks of the first frames, seen in at least ``min_frames`` of them,
+    that no mirror track was paired with: markers whose 3D position cannot be decided
+    (procedure step 2). Per track: where it was first seen (frame, x, y px), its colour
+    class, the frames it was seen in, and why -- ``ambiguous`` (rival partners in a
+    mirror: the mirrors listed) or ``no mirror partner``."""
+    seen = np.zeros(n_dt, int)
+    first = np.full(n_dt, -1)
+    xy = np.zeros((n_dt, 2))
+    colour = np.zeros(n_dt, int)
+    for f in range(det.n_frames - 1, -1, -1):  # backwards: the earliest sighting is written last
+        ids = np.asarray(dids[f], int)
+        if ids.size == 0:
+            continue
+        seen[ids] += 1
+        first[ids] = f
+        xy[ids] = det.xy[0][det.frame_view(f, 0)]
+        colour[ids] = det.colour[0][det.frame_view(f, 0)]
+    tracks = np.flatnonzero((seen >= min_frames) & np.all(partner < 0, axis=0))
+    return {"track": tracks, "frame": first[tracks], "xy": xy[tracks], "colour": colour[tracks],
+            "frames_seen": seen[tracks], "ambiguous_in": ambiguous[:, tracks].T}
+
+
+def track_positions(det: ClipDetections, normals, ds, dids, n_dt, partner, mids_all, tracks):
+    """3D position of chosen direct tracks in every frame where the track and one of
+    its partner mirror tracks both have a blob (fused over mirrors): ``pos (F, M, 3)``
+    (NaN elsewhere, each frame's own camera coordinates), the direct blob per frame
+    ``(F, M)`` (-1: absent) and each track's colour ``(M,)``. Vectorised over the whole
+    window (:func:`.pairing.partner_blobs`)."""
+    F, M, K = det.n_frames, len(tracks), len(normals)
+    col_of = np.full(n_dt, -1)
+    col_of[tracks] = np.arange(M)
+    pos = np.full((F, M, 3), np.nan)
+    blob = np.full((F, M), -1)
+    colour = np.full(M, -1)
+    track, mirror_blob = partner_blobs(det, dids, partner, mids_all)
+    sel = np.flatnonzero(col_of[track] >= 0)  # the chosen tracks' blobs, in frame order
+    f, marker = det.frame[0][sel], col_of[track[sel]]
+    blob[f, marker] = sel - det.start[0][f]  # the blob's index in its frame
+    _, first = np.unique(marker, return_index=True)
+    colour[marker[first]] = det.colour[0][sel[first]]
+    vis = mirror_blob[:, sel] >= 0
+    ok = vis.any(axis=0)
+    pm = np.stack([det.norm[k + 1][np.maximum(mirror_blob[k, sel[ok]], 0)] if len(det.norm[k + 1])
+                   else np.zeros((int(ok.sum()), 2)) for k in range(K)])
+    if ok.any():
+        pos[f[ok], marker[ok]] = points_from_planes(det.norm[0][sel[ok]], pm, normals, ds, visible=vis[:, ok])
+    return pos, blob, colour
+
+
+def _mirrors_spread(det: ClipDetections, normals, ds, dids, n_dt, mids_all, tracks, mates) -> np.ndarray:
+    """Per direct track of ``tracks``, the median distance over the window between its reconstructions through
+    each of the two mirrors, paired with its ``mates`` ``(2, n_dt)`` there (NaN: never through both)."""
+    one = []
+    for k in range(2):
+        p_k = np.full_like(mates, -1)
+        p_k[k, tracks] = mates[k, tracks]
+        one.append(track_positions(det, normals, ds, dids, n_dt, p_k, mids_all, tracks)[0])
+    with warnings.catch_warnings():   # a track never reconstructed through both mirrors: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(np.linalg.norm(one[0] - one[1], axis=2), axis=0)
+
+
+def _settle_contests(det: ClipDetections, normals, ds, dids, n_dt, partner, detail, mids_all,
+                     factor: float = 3.0, floor_mm: float = 0.5):
+    """A contested mirror image (:class:`.pairing.TrackPairs`: the only partner of two like dots on its line,
+    the band unable to tell which it shows) goes to the one dot that the other mirror sees at the same 3D
+    point through one of its partners there (:func:`_mirrors_spread` within ``factor`` times the markers
+    paired in both mirrors, at least ``floor_mm``), with that partner; the other dot loses it. Where no
+    contender, or more than one, is confirmed so, the assignment stands."""
+    both = np.flatnonzero(np.all(partner >= 0, axis=0))
+    if len(normals) != 2 or both.size < 3 or not any(len(c) for c in detail["contested"]):
+        return partner
+    spread = functools.partial(_mirrors_spread, det, normals, ds, dids, n_dt, mids_all)
+    limit = max(factor * float(np.nanmedian(spread(both, partner))), floor_mm)
+    partner = partner.copy()
+    for k in range(2):
+        contested, other = detail["contested"][k], detail["qualifying"][1 - k]
+        for image in np.unique(contested[:, 1]):
+            confirmed = []
+            for dot in contested[contested[:, 1] == image, 0]:
+                for seen in other[other[:, 0] == dot, 1]:
+                    mates = np.full((2, n_dt), -1)
+                    mates[k, dot], mates[1 - k, dot] = image, seen
+                    if spread(np.array([dot]), mates)[0] <= limit:
+                        confirmed.append((dot, seen))
+            if len(confirmed) == 1:
+                (dot, seen), = confirmed
+                partner[k][partner[k] == image] = -1
+                partner[1 - k][partner[1 - k] == seen] = -1
+                partner[k, dot], partner[1 - k, dot] = image, seen
+    return partner
+
+
+def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partner, wide, mids_all,
+                             factor: float = 3.0, floor_mm: float = 0.5):
+    """Direct tracks with no partner in any mirror (a marker on the face's midline is seen at a
+    grazing angle in both mirrors, its images noisier than most: it leaves the 1 px band too
+    often), paired in *each* mirror when the band is wider and the RMS test is off (``wide``,
+    :func:`.pairing.paired_tracks`): both partners are taken when the two mirrors put the marker
+    at the same 3D point -- their median distance over the window within ``factor`` times the
+    median of the markers both mirrors pair cleanly (at least ``floor_mm``), and neither mirror
+    track is another marker's partner. Chance alignments in two mirrors at once do not agree in
+    3D."""
+    free = np.stack([(wide[k] >= 0) & ~np.isin(wide[k], partner[k][partner[k] >= 0]) for k in range(2)])
+    noisy = np.where(free, wide, -1)
+    cand = np.flatnonzero(np.all(partner < 0, axis=0) & np.all(noisy >= 0, axis=0))
+    both = np.flatnonzero(np.all(partner >= 0, axis=0))
+    if cand.size == 0 or both.size < 3:
+        return partner
+    spread = functools.partial(_mirrors_spread, det, normals, ds, dids, n_dt, mids_all)
+    typical = float(np.nanmedian(spread(both, partner)))
+    agree = spread(cand, noisy) <= max(factor * typical, floor_mm)
+    partner = partner.copy()
+    partner[:, cand[agree]] = noisy[:, cand[agree]]
+    return partner
+
+
+def initial_markers(det: ClipDetections, camera, normals, ds, settings, seeds=None):
+    """Step 2: markers are direct-view tracks paired with a mirror track over the first
+    ``init_frames`` frames. Each marker's neutral position is its 3D position at the
+    first frame where it is paired, mapped into frame 0 by a robust rigid fit of the
+    markers both frames share (so markers hidden at frame 0 are tracked too).
+    Returns each marker's frame-0 direct blob (-1 if absent), the neutral structure
+    (N, 3), the markers' colour classes (N,) and the frame each is measured from (N,),
+    here 0; and the undecided direct-view tracks (:func:`undecided_tracks`)."""
+    W = min(settings.init_frames, det.n_frames)
+    init = det.head(W)
+    detail = {}
+    dids, n_dt, partner, mids_all, ambiguous, _ = paired_tracks(init, camera, normals, settings.band_px,
+                                                               min(5, W), detail=detail)
+    partner = _settle_contests(init, normals, ds, dids, n_dt, partner, detail, mids_all)
+    if settings.wide_band_factor > 1.0 and len(normals) == 2:
+        wide = paired_tracks(init, camera, normals, settings.wide_band_factor * settings.band_px, min(5, W),
+                             max_rms_factor=np.inf, tracks=(dids, n_dt, mids_all))[2]
+        partner = _confirm_by_both_mirrors(init, normals, ds, dids, n_dt, partner, wide, mids_all)
+    named = {}
+    if seeds is not None:                  # the user's designations win over the automatic pairing
+        seed_direct, seed_mirror = seeded_tracks(seeds, init, dids, mids_all)
+        for k in range(len(normals)):
+            for i in np.flatnonzero(seed_mirror[k] >= 0):
+                partner[k, partner[k] == seed_mirror[k, i]] = -1
+                partner[k, seed_direct[i]] = seed_mirror[k, i]
+        named = {int(t): name for t, name in zip(seed_direct, seeds.names)}
+    undecided = undecided_tracks(init, dids, n_dt, partner, ambiguous, min(5, W))
+    undecided["blobs"] = [np.asarray(d, int) for d in dids]  # track id of each direct blob, per frame
+    tracks = np.flatnonzero(np.any(partner >= 0, axis=0))
+    if tracks.size < 10:
+        raise DegenerateError(f"only {tracks.size} markers could be paired between the direct view and a mirror "
+                              "in the first frames; are both mirrors visible and calibrated?")
+    pos, blob, colour = track_positions(init, normals, ds, dids, n_dt, partner, mids_all, tracks)
+    neutral = pos[0].copy()
+    known = np.all(np.isfinite(neutral), axis=1)
+    for f in range(1, W):
+        new = ~known & np.all(np.isfinite(pos[f]), axis=1)
+        common = known & np.all(np.isfinite(pos[f]), axis=1)
+        if new.any() and common.sum() >= 6:
+            R, T, _ = robust_rigid_fit(pos[f, common], neutral[common])  # frame f -> frame 0
+            neutral[new] = pos[f, new] @ R.T + T
+            known |= new
+    keep = np.flatnonzero(known)
+    missing = [name for t, name in named.items() if not known[np.searchsorted(tracks, t)]]
+    if missing:
+        raise DegenerateError(f"seed {missing[0]!r}: no 3D position in the first {W} frames (its direct and mirror "
+                              "points do not meet on one ray: are they the same dot?)")
+    names = [named.get(int(tracks[i])) for i in keep]
+    return (blob[0, keep], neutral[keep], colour[keep], np.zeros(keep.size, int)), undecided, names
