@@ -57,8 +57,8 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     blob), is that marker found again and is not added; nor is one whose neutral
     position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
     blob with a chain on a better supported pairing of 2D tracks (:func:`.pairing.chain_pairing_support`; a chain
-    that shares blobs with chains kept on worse supported pairings replaces them), nor one off the face: more than ``off_face_mm`` along its
-    ray, where it is first seen, from the surface through the markers measured then
+    that shares blobs with chains kept on worse supported pairings replaces them), nor one off the face: more
+    than ``off_face_mm`` along its ray, where it is first seen, from the surface through the markers measured then
     (:func:`.onface.off_the_face`; a direct blob paired with another marker's mirror image lands
     along its ray, typically ~45 mm away) *and*, with the mirrors' ``planes`` ``(normals (K, 3),
     ds (K,))`` given, off it as each mirror it was paired through sees it (:func:`.onface.off_in_mirrors`;

@@ -12,7 +12,8 @@ alignments do not persist, so pairs are decided between *tracks*:
 2. :func:`pair_tracks` scores every same-colour (direct track, mirror track) pair by
    how often and how closely it sits in the band over the frames both tracks
    exist, and assigns pairs one-to-one; what cannot be decided is reported with
-   its ambiguity rather than forced.
+   its ambiguity rather than forced, and a mirror image that two dots contest is reported
+   for the tracker to settle through the other mirror (``core.track.initial``).
 """
 
 from __future__ import annotations
@@ -98,7 +99,8 @@ class TrackPairs:
     rms_px: np.ndarray  # (P,) band residual over the frames they were paired
     support: np.ndarray  # (P,) frames in which the pair sat in the band
     ambiguous: np.ndarray  # direct tracks with more than one plausible partner, left unpaired
-    qualifying: np.ndarray = None  # (Q, 2) every (direct track, mirror track) pair that qualified, before the above
+    qualifying: np.ndarray = None  # (Q, 2) every (direct track, mirror track) pair that qualified (before the
+    # ambiguity test and the assignment)
     contested: np.ndarray = None  # (R, 2) the qualifying pairs of mirror tracks that are the only partner of two
     # direct tracks or more, of comparable support and residual (CONTEST_RMS_RATIO): which dot the image shows, the
     # band cannot tell (the assignment gives it to the one a shade nearer its line)
@@ -155,6 +157,7 @@ def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera
         dt, mt, rms, support = dt[close], mt[close], rms[close], support[close]
     # ambiguity: a rival partner with comparable support (best and second best per direct track)
     ambiguous = _rivalled(dt, support, ambiguity_ratio)
+    # a contested image (TrackPairs.contested): the only partner of two direct tracks that it rivals as closely
     sole = np.bincount(dt, minlength=int(dt.max(initial=-1)) + 1)[dt] == 1
     contested_tracks = _rivalled(mt[sole], support[sole], ambiguity_ratio, rms[sole], CONTEST_RMS_RATIO)
     on = sole & np.isin(mt, contested_tracks)
@@ -462,13 +465,13 @@ def back_on_mirror_track(mtrack, dtrack, last_mtrack, last_dtrack, held, last_fr
 
 
 def chain_pairing_support(chains, support, rows, direct_track, mirror_track) -> dict:
-    """Per late chain (:func:`.late.add_late_markers`) of ``chains``, the support of its pairing of 2D tracks: the frames (``support``) of all the
-    chains that pair the same direct track with the same track in a mirror (each chain's tracks: the most
-    frequent among its candidates ``rows``; the best of its mirrors). Two like dots on one mirrored epipolar
-    line and their two images on another (one a grazing image): both ways of pairing them sit in the band, but
-    where a chance pairing's rays meet slides as the head turns, so its chains break and stay short, while the
-    true pairing chains on (ruddy540: a dot's chains with the other's image 45 frames, with its own 54; the
-    other dot's 34 with the first's image and 72 with its own)."""
+    """Per late chain (:func:`.late.add_late_markers`) of ``chains``, the support of its pairing of 2D tracks: the
+    frames (``support``) of all the chains that pair the same direct track with the same track in a mirror (each
+    chain's tracks: the most frequent among its candidates ``rows``; the best of its mirrors). Two like dots on
+    one mirrored epipolar line and their two images on another (one a grazing image): both ways of pairing them
+    sit in the band, but where a chance pairing's rays meet slides as the head turns, so its chains break and
+    stay short, while the true pairing chains on (ruddy540: a dot's chains with the other's image 45 frames, with
+    its own 54; the other dot's 34 with the first's image and 72 with its own)."""
     def most(values):
         values = values[values >= 0]
         return int(np.bincount(values).argmax()) if values.size else -1
