@@ -116,6 +116,7 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
     import json
     import multiprocessing
     import os
+    import signal
     import time
     from multiprocessing.connection import wait
     from pathlib import Path
@@ -157,11 +158,18 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
         saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
         os.environ.update({k: threads for k in THREAD_VARIABLES})
         reader, writer = ctx.Pipe(duplex=False)
+        # Ctrl-C reaches the whole process group: a worker still starting (before _batch_worker ignores it) died
+        # of it with "Fatal Python error: init_import_site" on the terminal (seen under load). It starts with
+        # SIGINT blocked -- the mask survives the spawn's exec -- and here a Ctrl-C waits until it has started.
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if hasattr(signal, "pthread_sigmask") \
+            else None
         try:
             proc = ctx.Process(target=_batch_worker, args=(tasks, writer, bake), daemon=True,
                                name=f"mirrorcap-batch-{started}")
             proc.start()                # the child inherits the environment here
         finally:
+            if blocked is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
             writer.close()
             for k, v in saved.items():
                 if v is None:

@@ -109,6 +109,33 @@ def bake_or_crash(job):
     return _bake_one(job)
 
 
+def report_sigint_mask(job):
+    """A batch's per-take function that reports whether its worker process has SIGINT blocked (module level: the
+    spawned workers import it by name)."""
+    import signal
+
+    blocked = signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+    return {"take": job[0], "ok": False, "seconds": None, "error": f"SIGINT blocked: {blocked}"}
+
+
+@pytest.mark.skipif(not hasattr(__import__("signal"), "pthread_sigmask"), reason="POSIX signal masks")
+def test_batch_workers_start_with_ctrl_c_blocked(tmp_path):
+    """Stop 47: Ctrl-C reaches the batch command's whole process group, and a worker still starting up -- before
+    it ignores SIGINT -- died of it printing "Fatal Python error: init_import_site" (test_batch_stops_cleanly_on_ctrl_c
+    failed so once, on a loaded machine). A worker is now spawned with SIGINT blocked (the mask survives the spawn's
+    exec), and the command's own mask is restored at once: the command stops the workers itself."""
+    import signal
+
+    from mirrorcap.cli.batch import run_batch
+
+    head = tmp_path / "head.blend"
+    head.write_bytes(b"not read")
+    summary = run_batch([tmp_path / "a.c3d", tmp_path / "b.c3d"], head, tmp_path / "out", workers=2, quiet=True,
+                        bake=report_sigint_mask)
+    assert [r["error"] for r in summary["results"]] == ["SIGINT blocked: True"] * 2
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+
+
 def test_batch_goes_on_when_a_take_kills_its_worker(demo, tmp_path):
     from mirrorcap.cli.batch import run_batch
 
