@@ -45,6 +45,14 @@ def _tracked(name, tmp_path, capsys, *options, out_name: str | None = None) -> s
     return out + err
 
 
+def _tracked_and_scored(name, tmp_path, capsys) -> tuple:
+    """:func:`_tracked` quietly, the take scored against the clip's truth: ``(scores, points over 2 mm)``."""
+    _tracked(name, tmp_path, capsys, "-q")
+    s, _, _ = scored_take(ROOT / "sample_scenes" / "normal" / name, tmp_path / f"{name}.c3d", tmp_path / f"{name}.json")
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    return s, int(np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0))
+
+
 def _projections(truth, camera, f):
     P = truth["points"][f]
     return [camera.project(P)] + [camera.project(reflect_points(P, truth["mirror_normals"][k], truth["mirror_d"][k]))
@@ -442,16 +450,9 @@ def test_two_dots_on_one_epipolar_line_keep_their_own_mirror_images(tmp_path, ca
     markers took them up. The chance pairing's chain was the longest, so it took the first dot, and the second dot
     then took the first's image: 10 identity switches (up to 9.3 mm), 24 points over 2 mm, 0.53 mm RMS, 92.6 % of
     the seen marker-frames. Of two late chains that share blobs, the one on the better supported pairing of 2D
-    tracks over the clip now stays (late._pairing_support; measured: 0 switches, 9 points over 2 mm, 0.46 mm RMS,
+    tracks over the clip now stays (pairing.chain_pairing_support; measured: 0 switches, 9 points over 2 mm, 0.46 mm RMS,
     92.8 %)."""
-    clip = ROOT / "sample_scenes" / "normal" / "ruddy540"
-    code, _, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
-                         "--rig", clip / "rig.json", "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json",
-                         "-q"], capsys)
-    assert code == 0, err
-    s, _, _ = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
-    err_mm = s["error_mm"][:, s["ids"] >= 0]
-    over = np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0)
+    s, over = _tracked_and_scored("ruddy540", tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0
     assert over <= 12 and s["rms_mm"] < 0.48
     assert s["seen_reported_fraction"] >= 0.925
@@ -466,17 +467,11 @@ def test_a_mirror_image_two_like_dots_contest_goes_to_the_one_the_other_mirror_c
     other's image: two markers wrong from the first frame, 68 identity switches, 180 points over 2 mm, 1.6 mm RMS
     -- with no warning. The contested image now goes to the dot that mirror 1 puts at the same 3D point
     (initial._settle_contests; measured: no switch, 43 points over 2 mm, 0.47 mm RMS, 96.2 %)."""
-    clip = ROOT / "sample_scenes" / "normal" / "blur540n"
-    code, _, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
-                         "--rig", clip / "rig.json", "-o", tmp_path / "take.c3d", "--report", tmp_path / "take.json",
-                         "-q"], capsys)
-    assert code == 0, err
-    s, _, _ = scored_take(clip, tmp_path / "take.c3d", tmp_path / "take.json")
-    err_mm = s["error_mm"][:, s["ids"] >= 0]
-    over = np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0)
+    s, over = _tracked_and_scored("blur540n", tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0
     assert over <= 60 and s["rms_mm"] < 0.55
     assert s["seen_reported_fraction"] >= 0.955
+
 
 def test_a_video_compressed_too_hard_links_the_mirrors_by_head_motion_and_says_so(tmp_path, capsys):
     """#18, stop 41: the rendered clips are kept near-losslessly (H.264 CRF 17); cameras and screen recorders
