@@ -470,8 +470,8 @@ def chain_pairing_support(chains, support, rows, direct_track, mirror_track) -> 
     chain's tracks: the most frequent among its candidates ``rows``; the best of its mirrors). Two like dots on
     one mirrored epipolar line and their two images on another (one a grazing image): both ways of pairing them
     sit in the band, but where a chance pairing's rays meet slides as the head turns, so its chains break and
-    stay short, while the true pairing chains on (ruddy540: a dot's chains with the other's image 45 frames, with
-    its own 54; the other dot's 34 with the first's image and 72 with its own)."""
+    stay short, while the true pairing chains on (ruddy540: the grazing image's chains with its own dot 72 frames,
+    with the other dot 45, though that chance pairing's single chain was the longest)."""
     def most(values):
         values = values[values >= 0]
         return int(np.bincount(values).argmax()) if values.size else -1
