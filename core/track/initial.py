@@ -15,6 +15,7 @@ from ..common.errors import DegenerateError
 from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import robust_rigid_fit
 from ..capture.views import ClipDetections
+from .candidates import spans
 from .pairing import paired_tracks, partner_blobs
 from .seeds import seeded_tracks
 
@@ -82,34 +83,50 @@ def _mirrors_spread(det: ClipDetections, normals, ds, dids, n_dt, mids_all, trac
         return np.nanmedian(np.linalg.norm(one[0] - one[1], axis=2), axis=0)
 
 
+def _agreement_limit(spread, partner, factor: float, floor_mm: float):
+    """How far apart a direct track's two single-mirror reconstructions may lie and still agree: ``factor`` times
+    the median :func:`_mirrors_spread` (``spread``) of the markers ``partner`` pairs in both mirrors, at least
+    ``floor_mm``; None with fewer than 3 such markers."""
+    both = np.flatnonzero(np.all(partner >= 0, axis=0))
+    return max(factor * float(np.nanmedian(spread(both, partner))), floor_mm) if both.size >= 3 else None
+
+
 def _settle_contests(det: ClipDetections, normals, ds, dids, n_dt, partner, detail, mids_all,
                      factor: float = 3.0, floor_mm: float = 0.5):
     """A contested mirror image (:class:`.pairing.TrackPairs`: the only partner of two like dots on its line,
     the band unable to tell which it shows) goes to the one dot that the other mirror sees at the same 3D
-    point through one of its partners there (:func:`_mirrors_spread` within ``factor`` times the markers
-    paired in both mirrors, at least ``floor_mm``), with that partner; the other dot loses it. Where no
-    contender, or more than one, is confirmed so, the assignment stands."""
-    both = np.flatnonzero(np.all(partner >= 0, axis=0))
-    if len(normals) != 2 or both.size < 3 or not any(len(c) for c in detail["contested"]):
+    point through one of its partners there (:func:`_agreement_limit`), with that partner; the other dot loses
+    it. Where no contender, or more than one, is confirmed so, the assignment stands."""
+    if len(normals) != 2 or not any(len(c) for c in detail["contested"]):
         return partner
     spread = functools.partial(_mirrors_spread, det, normals, ds, dids, n_dt, mids_all)
-    limit = max(factor * float(np.nanmedian(spread(both, partner))), floor_mm)
+    limit = _agreement_limit(spread, partner, factor, floor_mm)
+    if limit is None:
+        return partner
     partner = partner.copy()
     for k in range(2):
         contested, other = detail["contested"][k], detail["qualifying"][1 - k]
-        for image in np.unique(contested[:, 1]):
-            confirmed = []
-            for dot in contested[contested[:, 1] == image, 0]:
-                for seen in other[other[:, 0] == dot, 1]:
-                    mates = np.full((2, n_dt), -1)
-                    mates[k, dot], mates[1 - k, dot] = image, seen
-                    if spread(np.array([dot]), mates)[0] <= limit:
-                        confirmed.append((dot, seen))
-            if len(confirmed) == 1:
-                (dot, seen), = confirmed
-                partner[k][partner[k] == image] = -1
-                partner[1 - k][partner[1 - k] == seen] = -1
-                partner[k, dot], partner[1 - k, dot] = image, seen
+        # each contender (a dot contests one image per mirror) with each of its partners in the other mirror
+        other = other[np.argsort(other[:, 0], kind="stable")]
+        lo = np.searchsorted(other[:, 0], contested[:, 0])
+        count = np.searchsorted(other[:, 0], contested[:, 0], "right") - lo
+        row, seen = np.repeat(np.arange(len(contested)), count), other[spans(lo, count), 1]
+        option = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
+        agree = np.zeros(row.size, bool)
+        for r in range(int(option.max(initial=-1)) + 1):          # each dot once per call: its r-th partner
+            at = np.flatnonzero(option == r)
+            dots = contested[row[at], 0]
+            mates = np.full((2, n_dt), -1)
+            mates[k, dots], mates[1 - k, dots] = contested[row[at], 1], seen[at]
+            agree[at] = spread(dots, mates) <= limit
+        image = contested[row[agree], 1]
+        images, confirmations = np.unique(image, return_counts=True)
+        for img in images[confirmations == 1]:
+            i = np.flatnonzero(image == img)[0]
+            dot, mate = contested[row[agree][i], 0], seen[agree][i]
+            partner[k][partner[k] == img] = -1
+            partner[1 - k][partner[1 - k] == mate] = -1
+            partner[k, dot], partner[1 - k, dot] = img, mate
     return partner
 
 
@@ -126,12 +143,13 @@ def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partn
     free = np.stack([(wide[k] >= 0) & ~np.isin(wide[k], partner[k][partner[k] >= 0]) for k in range(2)])
     noisy = np.where(free, wide, -1)
     cand = np.flatnonzero(np.all(partner < 0, axis=0) & np.all(noisy >= 0, axis=0))
-    both = np.flatnonzero(np.all(partner >= 0, axis=0))
-    if cand.size == 0 or both.size < 3:
+    if cand.size == 0:
         return partner
     spread = functools.partial(_mirrors_spread, det, normals, ds, dids, n_dt, mids_all)
-    typical = float(np.nanmedian(spread(both, partner)))
-    agree = spread(cand, noisy) <= max(factor * typical, floor_mm)
+    limit = _agreement_limit(spread, partner, factor, floor_mm)
+    if limit is None:
+        return partner
+    agree = spread(cand, noisy) <= limit
     partner = partner.copy()
     partner[:, cand[agree]] = noisy[:, cand[agree]]
     return partner

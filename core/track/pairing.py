@@ -99,9 +99,9 @@ class TrackPairs:
     rms_px: np.ndarray  # (P,) band residual over the frames they were paired
     support: np.ndarray  # (P,) frames in which the pair sat in the band
     ambiguous: np.ndarray  # direct tracks with more than one plausible partner, left unpaired
-    qualifying: np.ndarray = None  # (Q, 2) every (direct track, mirror track) pair that qualified (before the
+    qualifying: np.ndarray  # (Q, 2) every (direct track, mirror track) pair that qualified (before the
     # ambiguity test and the assignment)
-    contested: np.ndarray = None  # (R, 2) the qualifying pairs of mirror tracks that are the only partner of two
+    contested: np.ndarray  # (R, 2) the qualifying pairs of mirror tracks that are the only partner of two
     # direct tracks or more, of comparable support and residual (CONTEST_RMS_RATIO): which dot the image shows, the
     # band cannot tell (the assignment gives it to the one a shade nearer its line)
 
