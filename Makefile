@@ -158,7 +158,8 @@ stress-clips: $(STAMP)
 # 215,165,140, 190 dots of 2.5 mm 660 mm away: 4.1 px in the mirrors, 60 frames; held out at stop 41); umber600
 # (960x600, a skin of sRGB 125,85,65, 180 dots of 3 mm 680 mm away, mirrors at 42 deg, 60 frames; held out at stop
 # 42); blur540n (960x540, a medium skin, 200 dots of 3.2 mm, expressions 2.5x as fast, each frame blurred over a
-# 1/60 s shutter; held out at stop 47). About 120 minutes.
+# 1/60 s shutter; held out at stop 47); touch576 (1024x576, a skin of sRGB 190,140,110, 220 dots of 2.8 mm, mirrors
+# at 44 deg, the mirrors' views touching the direct one; held out at stop 47, kept at stop 48). About 125 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -194,6 +195,9 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin medium --out sample_scenes/normal/blur540n \
 		--size 960 540 --focal 830 --markers 200 --marker-mm 3.2 --tempo 2.5 --shutter 0.5 --blur-steps 4 \
 		--frames 60 --seed 11 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 190,140,110 --out sample_scenes/normal/touch576 \
+		--size 1024 576 --focal 900 --markers 220 --marker-mm 2.8 --mirror-deg 44 --head-deg 10 12 5 --tempo 2 \
+		--frames 75 --seed 21 --no-scan
 
 # Stress clips with an object passed in front of the face (stop 46): a dark sphere -- a hand or a microphone under
 # black light -- swept sideways before the lower face (sample_scenes/occlude_clip.py), hiding the mouth's dots from

@@ -16,8 +16,15 @@ from ..geometry.mirror import points_from_planes
 from ..geometry.rigid import robust_rigid_fit
 from ..capture.views import ClipDetections
 from .candidates import spans
-from .pairing import paired_tracks, partner_blobs
+from .pairing import blob_tracks, clip_band_support, paired_tracks, partner_blobs
 from .seeds import seeded_tracks
+
+#: a contested image the other mirror cannot settle goes to the dot whose pairing with it holds in the band over
+#: the whole clip in this many times as many frames as its rival's (:func:`_settle_by_clip_support`)
+CLIP_SUPPORT_RATIO = 1.5
+#: ... and holds in the band in at least this share of the frames both are seen (a dot and its own image do,
+#: unless the video is too noisy for the band to tell)
+CLIP_SUPPORT_SHARE = 0.9
 
 
 def undecided_tracks(det: ClipDetections, dids, n_dt, partner, ambiguous, min_frames: int) -> dict:
@@ -91,42 +98,84 @@ def _agreement_limit(spread, partner, factor: float, floor_mm: float):
     return max(factor * float(np.nanmedian(spread(both, partner))), floor_mm) if both.size >= 3 else None
 
 
-def _settle_contests(det: ClipDetections, normals, ds, dids, n_dt, partner, detail, mids_all,
-                     factor: float = 3.0, floor_mm: float = 0.5):
+def _settle_contests(det: ClipDetections, init: ClipDetections, camera, normals, ds, dids, n_dt, partner, detail,
+                     mids_all, band_px: float, factor: float = 3.0, floor_mm: float = 0.5):
     """A contested mirror image (:class:`.pairing.TrackPairs`: the only partner of two like dots on its line,
-    the band unable to tell which it shows) goes to the one dot that the other mirror sees at the same 3D
-    point through one of its partners there (:func:`_agreement_limit`), with that partner; the other dot loses
-    it. Where no contender, or more than one, is confirmed so, the assignment stands."""
-    if len(normals) != 2 or not any(len(c) for c in detail["contested"]):
+    the band unable to tell which it shows over the first frames ``init``) goes to the one dot that the other
+    mirror sees at the same 3D point through one of its partners there (:func:`_agreement_limit`), with that
+    partner; the other dot loses it. Where no contender, or more than one, is confirmed so, it goes to the dot
+    whose pairing with it holds over the whole clip ``det`` (:func:`_settle_by_clip_support`)."""
+    if not any(len(c) for c in detail["contested"]):
         return partner
-    spread = functools.partial(_mirrors_spread, det, normals, ds, dids, n_dt, mids_all)
-    limit = _agreement_limit(spread, partner, factor, floor_mm)
-    if limit is None:
-        return partner
+    spread = functools.partial(_mirrors_spread, init, normals, ds, dids, n_dt, mids_all)
+    limit = _agreement_limit(spread, partner, factor, floor_mm) if len(normals) == 2 else None
     partner = partner.copy()
-    for k in range(2):
-        contested, other = detail["contested"][k], detail["qualifying"][1 - k]
-        # each contender (a dot contests one image per mirror) with each of its partners in the other mirror
-        other = other[np.argsort(other[:, 0], kind="stable")]
-        lo = np.searchsorted(other[:, 0], contested[:, 0])
-        count = np.searchsorted(other[:, 0], contested[:, 0], "right") - lo
-        row, seen = np.repeat(np.arange(len(contested)), count), other[spans(lo, count), 1]
-        option = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
-        agree = np.zeros(row.size, bool)
-        for r in range(int(option.max(initial=-1)) + 1):          # each dot once per call: its r-th partner
-            at = np.flatnonzero(option == r)
-            dots = contested[row[at], 0]
-            mates = np.full((2, n_dt), -1)
-            mates[k, dots], mates[1 - k, dots] = contested[row[at], 1], seen[at]
-            agree[at] = spread(dots, mates) <= limit
-        image = contested[row[agree], 1]
-        images, confirmations = np.unique(image, return_counts=True)
-        for img in images[confirmations == 1]:
-            i = np.flatnonzero(image == img)[0]
-            dot, mate = contested[row[agree][i], 0], seen[agree][i]
-            partner[k][partner[k] == img] = -1
-            partner[1 - k][partner[1 - k] == mate] = -1
-            partner[k, dot], partner[1 - k, dot] = img, mate
+    for k in range(len(normals)):
+        contested = detail["contested"][k]
+        settled = np.zeros(0, int)
+        if limit is not None and len(contested):
+            other = detail["qualifying"][1 - k]
+            # each contender (a dot contests one image per mirror) with each of its partners in the other mirror
+            other = other[np.argsort(other[:, 0], kind="stable")]
+            lo = np.searchsorted(other[:, 0], contested[:, 0])
+            count = np.searchsorted(other[:, 0], contested[:, 0], "right") - lo
+            row, seen = np.repeat(np.arange(len(contested)), count), other[spans(lo, count), 1]
+            option = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
+            agree = np.zeros(row.size, bool)
+            for r in range(int(option.max(initial=-1)) + 1):          # each dot once per call: its r-th partner
+                at = np.flatnonzero(option == r)
+                dots = contested[row[at], 0]
+                mates = np.full((2, n_dt), -1)
+                mates[k, dots], mates[1 - k, dots] = contested[row[at], 1], seen[at]
+                agree[at] = spread(dots, mates) <= limit
+            image = contested[row[agree], 1]
+            images, confirmations = np.unique(image, return_counts=True)
+            settled = images[confirmations == 1]
+            for img in settled:
+                i = np.flatnonzero(image == img)[0]
+                dot, mate = contested[row[agree][i], 0], seen[agree][i]
+                partner[k][partner[k] == img] = -1
+                partner[1 - k][partner[1 - k] == mate] = -1
+                partner[k, dot], partner[1 - k, dot] = img, mate
+        rest = contested[~np.isin(contested[:, 1], settled)]
+        if len(rest):
+            partner = _settle_by_clip_support(det, camera, normals[k], k, rest, dids, mids_all[k], partner, band_px)
+    return partner
+
+
+def _clip_track_of(det: ClipDetections, view: int, ids_per_frame) -> np.ndarray:
+    """Per 2D track of the first frames (``ids_per_frame``, :func:`.pairing.track_2d` over them), the whole clip's
+    2D track (:func:`.pairing.blob_tracks`) of its first blob ``(n,)``."""
+    first = np.concatenate([np.asarray(i, int) for i in ids_per_frame]) if len(ids_per_frame) else np.zeros(0, int)
+    out = np.full(int(first.max(initial=-1)) + 1, -1)
+    tracks, at = np.unique(first, return_index=True)        # blobs in frame order: each track's first blob
+    out[tracks] = blob_tracks(det)[view][at]
+    return out
+
+
+def _settle_by_clip_support(det: ClipDetections, camera, normal, mirror: int, contested, dids, mids, partner,
+                            band_px: float):
+    """The contested images of ``mirror`` (``contested`` ``(R, 2)``: direct track, mirror track of the first
+    frames) that the other mirror did not settle: each goes to the contender whose whole-clip 2D track keeps its
+    own in the band in at least :data:`CLIP_SUPPORT_SHARE` of the frames both are seen, and in at least
+    :data:`CLIP_SUPPORT_RATIO` times as many frames as any rival's (:func:`.pairing.clip_band_support`); the
+    rivals lose it. The first frames may hold both dots in the band
+    (hn1: a dot seen only directly and the dot beside it at one height, 0.19 and 0.29 px, the wrong one nearer);
+    over the clip the chance alignment slides out (20 frames of 46 against 45 of 46). Where no contender stands
+    out so, the assignment stands: in a noisy video a dot's own image leaves the band too (hd at CRF 26: 16 of 34
+    frames, where a like dot at its height sat in it in 28)."""
+    support, shared = clip_band_support(det, camera, normal, mirror, _clip_track_of(det, 0, dids)[contested[:, 0]],
+                                        _clip_track_of(det, mirror + 1, mids)[contested[:, 1]], band_px)
+    order = np.lexsort((-support, contested[:, 1]))
+    image, support, shared, dot = contested[order, 1], support[order], shared[order], contested[order, 0]
+    first = np.flatnonzero(np.r_[True, image[1:] != image[:-1]])
+    runner_up = np.r_[first[1:], image.size]           # a contested image has two contenders or more
+    clear = ((support[first] > 0) & (support[first] >= CLIP_SUPPORT_SHARE * shared[first])
+             & (support[first] >= CLIP_SUPPORT_RATIO * support[np.minimum(first + 1, image.size - 1)]))
+    partner = partner.copy()
+    for i in first[clear & (runner_up - first > 1)]:
+        partner[mirror][partner[mirror] == image[i]] = -1
+        partner[mirror, dot[i]] = image[i]
     return partner
 
 
@@ -168,7 +217,8 @@ def initial_markers(det: ClipDetections, camera, normals, ds, settings, seeds=No
     detail = {}
     dids, n_dt, partner, mids_all, ambiguous, _ = paired_tracks(init, camera, normals, settings.band_px,
                                                                min(5, W), detail=detail)
-    partner = _settle_contests(init, normals, ds, dids, n_dt, partner, detail, mids_all)
+    partner = _settle_contests(det, init, camera, normals, ds, dids, n_dt, partner, detail, mids_all,
+                               settings.band_px)
     if settings.wide_band_factor > 1.0 and len(normals) == 2:
         wide = paired_tracks(init, camera, normals, settings.wide_band_factor * settings.band_px, min(5, W),
                              max_rms_factor=np.inf, tracks=(dids, n_dt, mids_all))[2]

@@ -327,14 +327,14 @@ def cut_at_splits(det: ClipDetections, view: int, ids: np.ndarray, radius_px: fl
     return ids
 
 
-def blob_tracks(det: ClipDetections, cands) -> list:
+def blob_tracks(det: ClipDetections) -> list:
     """The 2D track (:func:`track_2d`, over the whole clip) of every blob of each view, ``(n_v,)``
     per view, the direct view's cut where two like dots merged in one blob come apart
-    (:func:`cut_at_splits`); computed once per clip (kept with the clip's candidates ``cands``, which every
-    caller has)."""
-    if "_blob_tracks" not in cands.__dict__:
+    (:func:`cut_at_splits`); computed once per clip (kept with the clip's detections ``det``: the
+    first frames' pairing reads them too, before the clip's candidates exist)."""
+    if "_blob_tracks" not in det.__dict__:
         out = []
-        for v in range(cands.mirror_blob.shape[1] + 1):
+        for v in range(len(det.xy)):
             if not len(det.xy[v]):
                 out.append(np.zeros(0, int))
                 continue
@@ -343,8 +343,37 @@ def blob_tracks(det: ClipDetections, cands) -> list:
             if v == 0:   # the mirrors' cut too: mirror35 19 -> 30 points over 2 mm, dots720 35 -> 38
                 ids = cut_at_splits(det, v, ids, SPLIT_SPACING_SHARE * det.typical_spacing(v))
             out.append(ids)
-        cands.__dict__["_blob_tracks"] = out
-    return cands.__dict__["_blob_tracks"]
+        det.__dict__["_blob_tracks"] = out
+    return det.__dict__["_blob_tracks"]
+
+
+def clip_band_support(det: ClipDetections, camera: Camera, normal, mirror: int, direct_track, mirror_track,
+                      band_px: float) -> np.ndarray:
+    """For each pair of whole-clip 2D tracks (:func:`blob_tracks`) -- ``direct_track`` ``(P,)`` of the direct
+    view, ``mirror_track`` ``(P,)`` of mirror ``mirror`` (plane ``normal``) -- the frames of the whole clip in
+    which the mirror track's blob lies within ``band_px`` of the direct track's blob's mirrored epipolar line
+    (eq. 5.2) ``(P,)``. A dot and its own mirror image stay in the band as the head turns and the face moves; two
+    dots' chance alignment on one line slides out of it."""
+    ids = blob_tracks(det)
+    direct_track, mirror_track = np.asarray(direct_track, int), np.asarray(mirror_track, int)
+    d_ids, m_ids = ids[0], ids[mirror + 1]
+    if direct_track.size == 0 or d_ids.size == 0 or m_ids.size == 0:
+        return np.zeros(direct_track.size, int)
+    by_track = np.argsort(d_ids, kind="stable")
+    lo = np.searchsorted(d_ids[by_track], direct_track)
+    count = np.searchsorted(d_ids[by_track], direct_track, "right") - lo
+    pair, blob = np.repeat(np.arange(direct_track.size), count), by_track[spans(lo, count)]
+    n = int(m_ids.max()) + 1
+    key = det.frame[mirror + 1] * n + m_ids
+    order = np.argsort(key, kind="stable")
+    want = det.frame[0][blob] * n + mirror_track[pair]
+    at = np.minimum(np.searchsorted(key[order], want), key.size - 1)
+    hit = key[order][at] == want
+    pair, blob, image = pair[hit], blob[hit], order[at[hit]]
+    lines = lines_of_normalised(det.norm[0][blob], camera, MirrorPlane(normal=np.asarray(normal, float), d=-1.0))
+    q = camera.ideal_pixels(det.norm[mirror + 1][image])
+    near = np.abs(lines[:, 0] * q[:, 0] + lines[:, 1] * q[:, 1] + lines[:, 2]) <= band_px
+    return np.bincount(pair[near], minlength=direct_track.size), np.bincount(pair, minlength=direct_track.size)
 
 
 def candidate_tracks(det: ClipDetections, cands):
@@ -352,7 +381,7 @@ def candidate_tracks(det: ClipDetections, cands):
     mirror blobs ``(C, K)`` (-1: no blob in that mirror)."""
     if "_tracks" in cands.__dict__:
         return cands.__dict__["_tracks"]
-    ids = blob_tracks(det, cands)
+    ids = blob_tracks(det)
     dtrack = ids[0][cands.direct] if len(cands.direct) else np.zeros(0, int)
     mtrack = np.full(cands.mirror_blob.shape, -1)
     for k in range(cands.mirror_blob.shape[1]):
@@ -365,7 +394,7 @@ def candidate_tracks(det: ClipDetections, cands):
 def direct_track_frames(det: ClipDetections, cands) -> np.ndarray:
     """Sorted codes ``track * F + frame`` of the frames each direct-view 2D track (the ids of
     :func:`blob_tracks`) has a blob in."""
-    return np.unique(blob_tracks(det, cands)[0].astype(np.int64) * det.n_frames + det.frame[0])
+    return np.unique(blob_tracks(det)[0].astype(np.int64) * det.n_frames + det.frame[0])
 
 
 def continuing_candidate(dtrack, mtrack, last_dtrack, last_mtrack, held=None) -> tuple:
@@ -423,7 +452,7 @@ def direct_track_spans(det: ClipDetections, cands) -> tuple:
     """The first and the last frame of each direct-view 2D track (the ids of :func:`blob_tracks`),
     ``(start (T,), end (T,))``; computed once per clip."""
     if "_spans" not in cands.__dict__:
-        ids = blob_tracks(det, cands)[0]
+        ids = blob_tracks(det)[0]
         start = np.full(int(ids.max(initial=-1)) + 1, det.n_frames)
         end = np.full(start.size, -1)
         np.minimum.at(start, ids, det.frame[0])
