@@ -1,8 +1,9 @@
 """The neutral structure (Lin 2003, the motion tracking procedure, step 2): markers are direct-view 2D
 tracks paired with mirror tracks over the first frames (:mod:`.pairing`); a mirror image that two like dots on its
-line contest goes to the one the other mirror confirms (:func:`_settle_contests`); a direct track left unpaired is
-paired in a wider band when both mirrors put it at the same 3D point (:func:`_confirm_by_both_mirrors`); the
-tracks paired in no mirror are reported (:func:`undecided_tracks`)."""
+line contest goes to the one the other mirror confirms, else to the one whose pairing with it holds over the whole
+clip (:func:`_settle_contests`); a direct track left unpaired is paired in a wider band when both mirrors put it at
+the same 3D point (:func:`_confirm_by_both_mirrors`); the tracks paired in no mirror are reported
+(:func:`undecided_tracks`)."""
 
 from __future__ import annotations
 
@@ -168,12 +169,13 @@ def _settle_by_clip_support(det: ClipDetections, camera, normal, mirror: int, co
                                         _clip_track_of(det, mirror + 1, mids)[contested[:, 1]], band_px)
     order = np.lexsort((-support, contested[:, 1]))
     image, support, shared, dot = contested[order, 1], support[order], shared[order], contested[order, 0]
-    first = np.flatnonzero(np.r_[True, image[1:] != image[:-1]])
-    runner_up = np.r_[first[1:], image.size]           # a contested image has two contenders or more
-    clear = ((support[first] > 0) & (support[first] >= CLIP_SUPPORT_SHARE * shared[first])
-             & (support[first] >= CLIP_SUPPORT_RATIO * support[np.minimum(first + 1, image.size - 1)]))
+    first = np.flatnonzero(np.r_[True, image[1:] != image[:-1]])      # each image's best supported contender
+    contenders = np.diff(np.r_[first, image.size])
+    runner_up = support[np.minimum(first + 1, image.size - 1)]
+    clear = ((contenders > 1) & (support[first] > 0) & (support[first] >= CLIP_SUPPORT_SHARE * shared[first])
+             & (support[first] >= CLIP_SUPPORT_RATIO * runner_up))
     partner = partner.copy()
-    for i in first[clear & (runner_up - first > 1)]:
+    for i in first[clear]:
         partner[mirror][partner[mirror] == image[i]] = -1
         partner[mirror, dot[i]] = image[i]
     return partner

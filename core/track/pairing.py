@@ -13,7 +13,8 @@ alignments do not persist, so pairs are decided between *tracks*:
    how often and how closely it sits in the band over the frames both tracks
    exist, and assigns pairs one-to-one; what cannot be decided is reported with
    its ambiguity rather than forced, and a mirror image that two dots contest is reported
-   for the tracker to settle through the other mirror (``core.track.initial``).
+   for the tracker to settle through the other mirror, or over the whole clip
+   (:func:`clip_band_support`; ``core.track.initial``).
 """
 
 from __future__ import annotations
