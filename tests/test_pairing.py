@@ -239,13 +239,14 @@ def test_one_mirror_image_on_the_line_of_two_like_dots_is_contested(rig):
 
 
 def test_a_contested_image_the_other_mirror_cannot_settle_goes_to_the_dot_that_stays_on_its_line(rig):
-    """#18, stop 48: held-out hn1 (1024x576, normal light): a dot seen only directly (on the cheek, near the face's
-    silhouette) and a like dot at its height, seen in mirror 1 only. In the first frames both sat in the band of the
-    one image on their line (0.19 and 0.29 px RMS, the wrong dot nearer); mirror 0 sees neither, so it cannot settle
-    the contest, and the assignment gave the image to the wrong dot: 17 identity switches. Over the whole clip the
-    image's own dot stays in the band (45 of the 46 frames both are seen) and the chance alignment slides out (20 of
-    46): the image goes to its own dot. Where the rival stays on the line too, or the video is so noisy that the own
-    dot leaves the band in over a tenth of the frames (here after the first ones), the assignment stands."""
+    """#18, stop 48: touch576 (1024x576, normal light; held out until then): a dot seen only directly (on the
+    cheek, near the face's silhouette) and a like dot at its height, seen directly and in mirror 1. In the first
+    frames both sat in the band of the one image on their line (0.19 and 0.29 px RMS, the wrong dot nearer); mirror
+    0 sees neither, so it cannot settle the contest, and the assignment gave the image to the wrong dot: 17
+    identity switches. Over the whole clip the image's own dot stays in the band (45 of the 46 frames both are seen)
+    and the chance alignment slides out (20 of 46): the image goes to its own dot. Where the rival stays on the line
+    too, or the video is so noisy that the own dot leaves the band in over a tenth of the frames (here after the
+    first ones), the assignment stands."""
     from mirrorcap.core.capture.views import FrameDets
     from mirrorcap.core.geometry.mirror import reflect_points
     from mirrorcap.core.track.initial import _settle_contests

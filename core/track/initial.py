@@ -160,11 +160,11 @@ def _settle_by_clip_support(det: ClipDetections, camera, normal, mirror: int, co
     frames) that the other mirror did not settle: each goes to the contender whose whole-clip 2D track keeps its
     own in the band in at least :data:`CLIP_SUPPORT_SHARE` of the frames both are seen, and in at least
     :data:`CLIP_SUPPORT_RATIO` times as many frames as any rival's (:func:`.pairing.clip_band_support`); the
-    rivals lose it. The first frames may hold both dots in the band
-    (hn1: a dot seen only directly and the dot beside it at one height, 0.19 and 0.29 px, the wrong one nearer);
-    over the clip the chance alignment slides out (20 frames of 46 against 45 of 46). Where no contender stands
-    out so, the assignment stands: in a noisy video a dot's own image leaves the band too (hd at CRF 26: 16 of 34
-    frames, where a like dot at its height sat in it in 28)."""
+    rivals lose it. The first frames may hold both dots in the band (touch576: a dot seen only directly and a like
+    dot at its height, 0.19 and 0.29 px, the wrong one nearer); over the clip the chance alignment slides out (20
+    frames of 46 against 45 of 46). Where no contender stands out so, the assignment stands: in a noisy video a
+    dot's own image leaves the band too (hd at CRF 26: 16 of 34 frames, where a like dot at its height sat in it in
+    28)."""
     support, shared = clip_band_support(det, camera, normal, mirror, _clip_track_of(det, 0, dids)[contested[:, 0]],
                                         _clip_track_of(det, mirror + 1, mids)[contested[:, 1]], band_px)
     order = np.lexsort((-support, contested[:, 1]))

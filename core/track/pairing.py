@@ -349,17 +349,18 @@ def blob_tracks(det: ClipDetections) -> list:
 
 
 def clip_band_support(det: ClipDetections, camera: Camera, normal, mirror: int, direct_track, mirror_track,
-                      band_px: float) -> np.ndarray:
+                      band_px: float) -> tuple:
     """For each pair of whole-clip 2D tracks (:func:`blob_tracks`) -- ``direct_track`` ``(P,)`` of the direct
     view, ``mirror_track`` ``(P,)`` of mirror ``mirror`` (plane ``normal``) -- the frames of the whole clip in
     which the mirror track's blob lies within ``band_px`` of the direct track's blob's mirrored epipolar line
-    (eq. 5.2) ``(P,)``. A dot and its own mirror image stay in the band as the head turns and the face moves; two
-    dots' chance alignment on one line slides out of it."""
+    (eq. 5.2), and the frames in which both tracks have a blob: ``(in_band (P,), shared (P,))``. A dot and its own
+    mirror image stay in the band as the head turns and the face moves; two dots' chance alignment on one line
+    slides out of it."""
     ids = blob_tracks(det)
     direct_track, mirror_track = np.asarray(direct_track, int), np.asarray(mirror_track, int)
     d_ids, m_ids = ids[0], ids[mirror + 1]
     if direct_track.size == 0 or d_ids.size == 0 or m_ids.size == 0:
-        return np.zeros(direct_track.size, int)
+        return np.zeros(direct_track.size, int), np.zeros(direct_track.size, int)
     by_track = np.argsort(d_ids, kind="stable")
     lo = np.searchsorted(d_ids[by_track], direct_track)
     count = np.searchsorted(d_ids[by_track], direct_track, "right") - lo
