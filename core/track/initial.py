@@ -103,45 +103,57 @@ def _settle_contests(det: ClipDetections, init: ClipDetections, camera, normals,
                      mids_all, band_px: float, factor: float = 3.0, floor_mm: float = 0.5):
     """A contested mirror image (:class:`.pairing.TrackPairs`: the only partner of two like dots on its line,
     the band unable to tell which it shows over the first frames ``init``) goes to the one dot that the other
-    mirror sees at the same 3D point through one of its partners there (:func:`_agreement_limit`), with that
-    partner; the other dot loses it. Where no contender, or more than one, is confirmed so, it goes to the dot
-    whose pairing with it holds over the whole clip ``det`` (:func:`_settle_by_clip_support`)."""
+    mirror sees at the same 3D point through one of its partners there (:func:`_settle_by_other_mirror`); where
+    no contender, or more than one, is confirmed so, to the dot whose pairing with it holds over the whole clip
+    ``det`` (:func:`_settle_by_clip_support`)."""
     if not any(len(c) for c in detail["contested"]):
         return partner
     spread = functools.partial(_mirrors_spread, init, normals, ds, dids, n_dt, mids_all)
     limit = _agreement_limit(spread, partner, factor, floor_mm) if len(normals) == 2 else None
+    direct_clip_track = None
     partner = partner.copy()
     for k in range(len(normals)):
         contested = detail["contested"][k]
-        settled = np.zeros(0, int)
         if limit is not None and len(contested):
-            other = detail["qualifying"][1 - k]
-            # each contender (a dot contests one image per mirror) with each of its partners in the other mirror
-            other = other[np.argsort(other[:, 0], kind="stable")]
-            lo = np.searchsorted(other[:, 0], contested[:, 0])
-            count = np.searchsorted(other[:, 0], contested[:, 0], "right") - lo
-            row, seen = np.repeat(np.arange(len(contested)), count), other[spans(lo, count), 1]
-            option = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
-            agree = np.zeros(row.size, bool)
-            for r in range(int(option.max(initial=-1)) + 1):          # each dot once per call: its r-th partner
-                at = np.flatnonzero(option == r)
-                dots = contested[row[at], 0]
-                mates = np.full((2, n_dt), -1)
-                mates[k, dots], mates[1 - k, dots] = contested[row[at], 1], seen[at]
-                agree[at] = spread(dots, mates) <= limit
-            image = contested[row[agree], 1]
-            images, confirmations = np.unique(image, return_counts=True)
-            settled = images[confirmations == 1]
-            for img in settled:
-                i = np.flatnonzero(image == img)[0]
-                dot, mate = contested[row[agree][i], 0], seen[agree][i]
-                partner[k][partner[k] == img] = -1
-                partner[1 - k][partner[1 - k] == mate] = -1
-                partner[k, dot], partner[1 - k, dot] = img, mate
-        rest = contested[~np.isin(contested[:, 1], settled)]
-        if len(rest):
-            partner = _settle_by_clip_support(det, camera, normals[k], k, rest, dids, mids_all[k], partner, band_px)
+            contested = _settle_by_other_mirror(contested, detail["qualifying"][1 - k], k, n_dt, partner, spread,
+                                                limit)
+        if len(contested):
+            if direct_clip_track is None:
+                direct_clip_track = _clip_track_of(det, 0, dids)
+            support, shared = clip_band_support(det, camera, normals[k], k, direct_clip_track[contested[:, 0]],
+                                                _clip_track_of(det, k + 1, mids_all[k])[contested[:, 1]], band_px)
+            _settle_by_clip_support(contested, support, shared, k, partner)
     return partner
+
+
+def _settle_by_other_mirror(contested, other, k: int, n_dt: int, partner, spread, limit: float):
+    """The contested images of mirror ``k`` (``contested`` ``(R, 2)``: direct track, mirror track) that exactly one
+    contender's reconstruction through one of its partners in the other mirror (``other``, that mirror's
+    qualifying pairs) agrees with (``spread`` within ``limit``, :func:`_agreement_limit`): that contender takes
+    the image and that partner, in ``partner`` (changed in place); the rest of ``contested`` is returned."""
+    # each contender (a dot contests one image per mirror) with each of its partners in the other mirror
+    other = other[np.argsort(other[:, 0], kind="stable")]
+    lo = np.searchsorted(other[:, 0], contested[:, 0])
+    count = np.searchsorted(other[:, 0], contested[:, 0], "right") - lo
+    row, seen = np.repeat(np.arange(len(contested)), count), other[spans(lo, count), 1]
+    option = np.arange(row.size) - np.repeat(np.cumsum(count) - count, count)
+    agree = np.zeros(row.size, bool)
+    for r in range(int(option.max(initial=-1)) + 1):          # each dot once per call: its r-th partner
+        at = np.flatnonzero(option == r)
+        dots = contested[row[at], 0]
+        mates = np.full((2, n_dt), -1)
+        mates[k, dots], mates[1 - k, dots] = contested[row[at], 1], seen[at]
+        agree[at] = spread(dots, mates) <= limit
+    image = contested[row[agree], 1]
+    images, confirmations = np.unique(image, return_counts=True)
+    settled = images[confirmations == 1]
+    for img in settled:
+        i = np.flatnonzero(image == img)[0]
+        dot, mate = contested[row[agree][i], 0], seen[agree][i]
+        partner[k][partner[k] == img] = -1
+        partner[1 - k][partner[1 - k] == mate] = -1
+        partner[k, dot], partner[1 - k, dot] = img, mate
+    return contested[~np.isin(contested[:, 1], settled)]
 
 
 def _clip_track_of(det: ClipDetections, view: int, ids_per_frame) -> np.ndarray:
@@ -154,19 +166,16 @@ def _clip_track_of(det: ClipDetections, view: int, ids_per_frame) -> np.ndarray:
     return out
 
 
-def _settle_by_clip_support(det: ClipDetections, camera, normal, mirror: int, contested, dids, mids, partner,
-                            band_px: float):
+def _settle_by_clip_support(contested, support, shared, mirror: int, partner) -> None:
     """The contested images of ``mirror`` (``contested`` ``(R, 2)``: direct track, mirror track of the first
     frames) that the other mirror did not settle: each goes to the contender whose whole-clip 2D track keeps its
-    own in the band in at least :data:`CLIP_SUPPORT_SHARE` of the frames both are seen, and in at least
-    :data:`CLIP_SUPPORT_RATIO` times as many frames as any rival's (:func:`.pairing.clip_band_support`); the
-    rivals lose it. The first frames may hold both dots in the band (touch576: a dot seen only directly and a like
-    dot at its height, 0.19 and 0.29 px, the wrong one nearer); over the clip the chance alignment slides out (20
-    frames of 46 against 45 of 46). Where no contender stands out so, the assignment stands: in a noisy video a
-    dot's own image leaves the band too (hd at CRF 26: 16 of 34 frames, where a like dot at its height sat in it in
-    28)."""
-    support, shared = clip_band_support(det, camera, normal, mirror, _clip_track_of(det, 0, dids)[contested[:, 0]],
-                                        _clip_track_of(det, mirror + 1, mids)[contested[:, 1]], band_px)
+    own in the band (``support``, of ``shared`` frames both are seen: :func:`.pairing.clip_band_support`) in at
+    least :data:`CLIP_SUPPORT_SHARE` of those frames, and in at least :data:`CLIP_SUPPORT_RATIO` times as many
+    frames as any rival's; the rivals lose it (``partner`` changed in place). The first frames may hold both dots
+    in the band (touch576: a dot seen only directly and a like dot at its height, 0.19 and 0.29 px, the wrong one
+    nearer); over the clip the chance alignment slides out (20 frames of 46 against 45 of 46). Where no contender
+    stands out so, the assignment stands: in a noisy video a dot's own image leaves the band too (hd at CRF 26: 16
+    of 34 frames, where a like dot at its height sat in it in 28)."""
     order = np.lexsort((-support, contested[:, 1]))
     image, support, shared, dot = contested[order, 1], support[order], shared[order], contested[order, 0]
     first = np.flatnonzero(np.r_[True, image[1:] != image[:-1]])      # each image's best supported contender
@@ -174,11 +183,9 @@ def _settle_by_clip_support(det: ClipDetections, camera, normal, mirror: int, co
     runner_up = support[np.minimum(first + 1, image.size - 1)]
     clear = ((contenders > 1) & (support[first] > 0) & (support[first] >= CLIP_SUPPORT_SHARE * shared[first])
              & (support[first] >= CLIP_SUPPORT_RATIO * runner_up))
-    partner = partner.copy()
     for i in first[clear]:
         partner[mirror][partner[mirror] == image[i]] = -1
         partner[mirror, dot[i]] = image[i]
-    return partner
 
 
 def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partner, wide, mids_all,
