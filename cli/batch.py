@@ -123,6 +123,7 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
 
     from ..core.common.errors import InputError
     from ..core.common.files import output_folder, write_files_atomically
+    from .interrupts import interrupts_held
 
     bake = bake or _bake_one
     out_dir = Path(out_dir)
@@ -157,27 +158,30 @@ def run_batch(takes, head, out_dir, workers: int = 1, options: dict | None = Non
         threads = str(max(1, (os.cpu_count() or 1) // n_proc))
         saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
         os.environ.update({k: threads for k in THREAD_VARIABLES})
-        reader, writer = ctx.Pipe(duplex=False)
         # Ctrl-C reaches the whole process group: a worker still starting (before _batch_worker ignores it) died
         # of it with "Fatal Python error: init_import_site" on the terminal (seen under load). It starts with
-        # SIGINT blocked -- the mask survives the spawn's exec -- and here a Ctrl-C waits until it has started.
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if hasattr(signal, "pthread_sigmask") \
-            else None
-        try:
-            proc = ctx.Process(target=_batch_worker, args=(tasks, writer, bake), daemon=True,
-                               name=f"mirrorcap-batch-{started}")
-            proc.start()                # the child inherits the environment here
-        finally:
-            if blocked is not None:
-                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-            writer.close()
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
-        workers_now[proc.sentinel] = [proc, reader, None]
-        started += 1
+        # SIGINT blocked -- the mask survives the spawn's exec -- and here a Ctrl-C waits until it has started
+        # and is registered (to be stopped below): raised between the spawn and the write of what the worker is
+        # to run, it left the worker reading an empty pipe (cli/interrupts.py).
+        with interrupts_held():
+            reader, writer = ctx.Pipe(duplex=False)
+            blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) \
+                if hasattr(signal, "pthread_sigmask") else None
+            try:
+                proc = ctx.Process(target=_batch_worker, args=(tasks, writer, bake), daemon=True,
+                                   name=f"mirrorcap-batch-{started}")
+                proc.start()                # the child inherits the environment here
+            finally:
+                if blocked is not None:
+                    signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+                writer.close()
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
+            workers_now[proc.sentinel] = [proc, reader, None]
+            started += 1
 
     def record(index, r):
         results[index] = r

@@ -38,12 +38,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import ExitStack
 
 from ..core import __version__
 from ..core.common.errors import MirrorCapError
 from ..core.common.files import check_output_paths
 from ..core.common.threads import limited_threads
 from . import commands
+from .interrupts import interrupts_held
 
 
 def _source_options(parser, what: str = "video file, image folder or glob", frames: bool = True):
@@ -349,7 +351,10 @@ def main(argv=None) -> int:
     try:
         # an output that could not be written is refused before the work, not after it
         check_output_paths(*(getattr(args, name, None) for name in ("output", "report", "csv")))
-        with limited_threads():     # one BLAS and one OpenCV thread (core/common/threads.py): tiny solves stall on more
+        with ExitStack() as work:
+            with interrupts_held():     # a Ctrl-C while OpenCV and threadpoolctl load takes effect after
+                # one BLAS and one OpenCV thread (core/common/threads.py): tiny solves stall on more
+                work.enter_context(limited_threads())
             return args.func(args)
     except MirrorCapError as exc:
         print(f"mirrorcap: error: {exc}", file=sys.stderr)

@@ -221,6 +221,59 @@ def test_failure_keeps_previous_output(sample, capsys):
     assert out.read_text() == "precious\n" and out.with_suffix(".json").read_text() == "{}\n"
 
 
+def test_a_ctrl_c_while_the_command_sets_up_stops_it_as_interrupted(sample, capsys, monkeypatch):
+    """Stop 49: a Ctrl-C while the command loaded OpenCV and threadpoolctl raised inside their code: threadpoolctl's
+    ctypes callback swallowed it, and the command ran to its end and exited 0 (inside ``import cv2`` it was an
+    ImportError traceback instead). Here the setup swallows the Ctrl-C the same way: the command now stops with
+    "interrupted", exit 130, and writes nothing."""
+    import contextlib
+    import os
+    import signal
+    import time
+
+    @contextlib.contextmanager
+    def setup_that_swallows_a_ctrl_c():
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.5)             # Python runs its handler here, at once
+        except KeyboardInterrupt:
+            pass                        # as a ctypes callback does with it
+        yield
+
+    monkeypatch.setattr(cli, "limited_threads", setup_that_swallows_a_ctrl_c)
+    code, out, err = _run(["reconstruct", sample / "pairs.csv", "--camera", sample / "camera.json",
+                           "-o", sample / "points.csv"], capsys)
+    assert (code, err.strip()) == (130, "mirrorcap: interrupted")
+    assert not (sample / "points.csv").exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_ctrl_c_ignored_stays_ignored(sample, capsys, monkeypatch):
+    """A command started as a shell's background job (SIGINT ignored) leaves it ignored: a SIGINT during its setup
+    changes nothing, and it runs to its end."""
+    import contextlib
+    import os
+    import signal
+    import time
+
+    @contextlib.contextmanager
+    def setup_sent_a_sigint():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)
+        yield
+
+    monkeypatch.setattr(cli, "limited_threads", setup_sent_a_sigint)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        code, _, err = _run(["reconstruct", sample / "pairs.csv", "--camera", sample / "camera.json",
+                             "-o", sample / "points.csv"], capsys)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert code == 0, err
+    assert (sample / "points.csv").exists()
+
+
 def test_usage_errors(capsys):
     with pytest.raises(SystemExit) as exc:
         cli.main(["reconstruct"])
