@@ -2,6 +2,6 @@
 (:mod:`.commands`; ``bpy`` is imported only by the ones that need Blender) and the batch
 worker pool (:mod:`.batch`)."""
 
-from .parser import main
+from .parser import entry, main
 
-__all__ = ["main"]
+__all__ = ["entry", "main"]

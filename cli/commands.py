@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..core import __version__
 from ..core.common.errors import MirrorCapError
+from .interrupts import interrupts_held
 
 
 def reconstruct(args) -> int:
@@ -229,7 +230,8 @@ def demo_mirrors(args) -> int:
 
 
 def bake(args) -> int:
-    from ..addon.bake.bake import run_bake
+    with interrupts_held():     # Blender loads here (cli/interrupts.py)
+        from ..addon.bake.bake import run_bake
     from ..core.face.facerig import RigSettings
 
     if args.modes < 1:
@@ -265,7 +267,8 @@ def _print_missing_shapes(res) -> None:
 
 
 def retarget(args) -> int:
-    from ..addon.retarget.retarget import run_livelink, run_retarget
+    with interrupts_held():     # Blender loads here (cli/interrupts.py)
+        from ..addon.retarget.retarget import run_livelink, run_retarget
 
     if str(args.take).lower().endswith(".csv"):
         if args.csv:
@@ -303,7 +306,8 @@ def retarget(args) -> int:
 
 
 def fap(args) -> int:
-    from ..addon.retarget.fap import run_fap
+    with interrupts_held():     # Blender loads here (cli/interrupts.py)
+        from ..addon.retarget.fap import run_fap
 
     res = run_fap(args.take, args.head, args.output, head_object=args.object, head_pose_report=args.head_pose,
                   marker_map=args.marker_map, neutral_frame=args.neutral_frame, drop_unseen=args.drop_unseen,
@@ -331,7 +335,8 @@ def batch(args) -> int:
 
 
 def demo(args) -> int:
-    from ..demo.rig import run_demo
+    with interrupts_held():     # Blender loads here (cli/interrupts.py)
+        from ..demo.rig import run_demo
 
     return run_demo(args.out, quiet=args.quiet)
 

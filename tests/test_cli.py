@@ -248,6 +248,31 @@ def test_a_ctrl_c_while_the_command_sets_up_stops_it_as_interrupted(sample, caps
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+def test_an_import_cut_short_by_a_ctrl_c_is_an_interruption_and_a_real_import_error_is_not(sample, capsys,
+                                                                                           monkeypatch):
+    """Stop 49: a Ctrl-C during the import a command makes as it starts turned into "ImportError: initialization
+    failed" (SciPy) and a traceback, exit 1. An error raised from a Ctrl-C now stops the command as interrupted;
+    any other error is raised as before."""
+    from mirrorcap.cli import commands
+
+    def reconstruct_whose_import_a_ctrl_c_cut_short(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    def reconstruct_with_a_broken_install(args):
+        raise ImportError("initialization failed")
+
+    args = ["reconstruct", sample / "pairs.csv", "--camera", sample / "camera.json", "-o", sample / "points.csv"]
+    monkeypatch.setattr(commands, "reconstruct", reconstruct_whose_import_a_ctrl_c_cut_short)
+    code, _, err = _run(args, capsys)
+    assert (code, err.strip()) == (130, "mirrorcap: interrupted")
+    monkeypatch.setattr(commands, "reconstruct", reconstruct_with_a_broken_install)
+    with pytest.raises(ImportError, match="initialization failed"):
+        _run(args, capsys)
+
+
 def test_ctrl_c_ignored_stays_ignored(sample, capsys, monkeypatch):
     """A command started as a shell's background job (SIGINT ignored) leaves it ignored: a SIGINT during its setup
     changes nothing, and it runs to its end."""
