@@ -1,8 +1,9 @@
 """Ctrl-C on the command line: the command stops with "interrupted" (exit 130) whenever it
 comes, never with a traceback from the code that happened to be running.
 
-Python raises ``KeyboardInterrupt`` wherever the main thread is. Two places could not take it
-(stop 49, ``mirrorcap batch`` interrupted 0.3-0.8 s after its start on a loaded machine):
+Python raises ``KeyboardInterrupt`` wherever the main thread is. Three places could not take it
+(stop 49: ``mirrorcap batch`` interrupted 0.3-0.8 s after its start on a loaded machine, ``bake``
+and ``track`` at moments from 0.1 to 6 s):
 
 - the command's setup: inside ``import cv2`` it became an ``ImportError`` traceback (exit 1),
   and inside the ctypes callback by which threadpoolctl finds the BLAS libraries it was
