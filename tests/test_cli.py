@@ -273,6 +273,35 @@ def test_an_import_cut_short_by_a_ctrl_c_is_an_interruption_and_a_real_import_er
         _run(args, capsys)
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("blender", [False, True])
+def test_the_entry_point_ignores_a_ctrl_c_once_the_command_is_done(blender):
+    """Stop 49: a Ctrl-C while the process exited after a finished ``bake`` (Blender's teardown) killed it by SIGINT;
+    after an interrupted one, Blender's teardown could end the process by SIGINT although "interrupted" had been
+    printed. The entry point (``mirrorcap``, ``python -m mirrorcap``) ignores a Ctrl-C once the command is done, and
+    with Blender loaded leaves at once after an interruption, with the command's exit status."""
+    code = ("import os, signal, sys, time\n"
+            "from mirrorcap.cli import parser\n"
+            + ("import bpy\n"
+               "parser.main = lambda: 130\n"
+               "sys.exit(10 + parser.entry())\n" if blender else
+               "parser.main = lambda: 0\n"
+               "status = parser.entry()\n"
+               "os.kill(os.getpid(), signal.SIGINT)\n"
+               "time.sleep(0.5)\n"
+               "print('exiting', flush=True)\n"
+               "sys.exit(status)\n"))
+    import signal
+
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300,
+                         # a shell's background job inherits SIGINT ignored; a user's terminal has it on
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    if blender:
+        assert res.returncode == 130, res.stdout + res.stderr       # left at once: not 140
+    else:
+        assert (res.returncode, res.stdout) == (0, "exiting\n"), res.stderr
+
+
 def test_ctrl_c_ignored_stays_ignored(sample, capsys, monkeypatch):
     """A command started as a shell's background job (SIGINT ignored) leaves it ignored: a SIGINT during its setup
     changes nothing, and it runs to its end."""
