@@ -362,14 +362,13 @@ def main(argv=None) -> int:
     except MirrorCapError as exc:
         print(f"mirrorcap: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:       # outputs are written atomically: nothing half-written is left
-        print("mirrorcap: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:         # the reader went away (`mirrorcap info TAKE.c3d | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit's flush
         return 141
-    except Exception as exc:
-        if not caused_by_ctrl_c(exc):   # e.g. an import that a Ctrl-C cut short: an ImportError
+    except (KeyboardInterrupt, Exception) as exc:
+        # Ctrl-C, or an error raised from one (an import it cut short: ImportError); outputs are written
+        # atomically: nothing half-written is left
+        if not caused_by_ctrl_c(exc):
             raise
         print("mirrorcap: interrupted", file=sys.stderr)
         return 130

@@ -33,12 +33,18 @@ def epipolar_distance(lines, mirror_px, camera: Camera, vertical: bool = False) 
     (both broadcast). ``vertical=True`` measures along the image's y axis as the band
     of eq. 5.3 does ("k pixels up and down"); the default measures perpendicular to
     the line, which stays meaningful for steep lines."""
-    q = camera.ideal_pixels(camera.normalize(mirror_px))
     lines = np.asarray(lines, dtype=float)
-    val = lines[..., 0] * q[..., 0] + lines[..., 1] * q[..., 1] + lines[..., 2]
+    dist = line_distance(lines, camera.ideal_pixels(camera.normalize(mirror_px)))
     if vertical:
-        return np.abs(val) / np.maximum(np.abs(lines[..., 1]), 1e-300)
-    return np.abs(val)
+        return dist / np.maximum(np.abs(lines[..., 1]), 1e-300)
+    return dist
+
+
+def line_distance(lines, ideal_px) -> np.ndarray:
+    """Distance in pixels of undistorted pixels ``(..., 2)`` from lines ``(..., 3)`` whose ``(a, b)`` is a unit
+    vector (:func:`lines_of_normalised`), both broadcast: the band test of eq. 5.3."""
+    lines = np.asarray(lines, dtype=float)
+    return np.abs(lines[..., 0] * ideal_px[..., 0] + lines[..., 1] * ideal_px[..., 1] + lines[..., 2])
 
 
 def in_mirrored_epipolar_band(

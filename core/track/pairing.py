@@ -25,7 +25,7 @@ import numpy as np
 
 from ..geometry.camera import Camera
 from ..capture.views import ClipDetections, frame_spaced
-from ..geometry.epipolar import lines_of_normalised
+from ..geometry.epipolar import line_distance, lines_of_normalised
 from ..geometry.mirror import MirrorPlane
 from .candidates import spans
 
@@ -136,7 +136,7 @@ def pair_tracks(det: ClipDetections, direct_ids, mirror: int, mirror_ids, camera
             continue
         lines = lines_of_normalised(dn, camera, plane)  # (n_d, 3), undistorted px
         q = camera.ideal_pixels(mn)  # (n_m, 2)
-        dist = np.abs(lines[:, None, 0] * q[None, :, 0] + lines[:, None, 1] * q[None, :, 1] + lines[:, None, 2])
+        dist = line_distance(lines[:, None], q[None])
         i, j = np.nonzero((dist <= band_px) & (dcol[:, None] == mcol[None, :]))
         keys.append(np.asarray(did)[i] * n_mt + np.asarray(mid)[j])
         sq.append(dist[i, j] ** 2)
@@ -253,25 +253,34 @@ def partner_blobs(det: ClipDetections, direct_ids, partner, mirror_ids):
     """For every direct blob of ``det`` (global index): its direct track ``(D,)`` and, per
     mirror, the blob of its partner track in the same frame ``(K, D)`` (global index in that
     mirror's view; -1 where the blob's track has no partner or the partner is not seen then).
-    ``direct_ids``, ``partner`` and ``mirror_ids`` as :func:`paired_tracks` returns them; a 2D
-    track holds at most one blob per frame, so (frame, track) finds one blob, by a sorted search."""
+    ``direct_ids``, ``partner`` and ``mirror_ids`` as :func:`paired_tracks` returns them."""
     track = np.concatenate([np.asarray(d, int) for d in direct_ids]) if len(direct_ids) else np.zeros(0, int)
     K = partner.shape[0]
     blob = np.full((K, track.size), -1)
     for k in range(K):
         m_track = (np.concatenate([np.asarray(m, int) for m in mirror_ids[k]]) if len(mirror_ids[k])
                    else np.zeros(0, int))
-        if m_track.size == 0 or track.size == 0:
-            continue
-        n = int(m_track.max()) + 1
-        key = det.frame[k + 1] * n + m_track
-        order = np.argsort(key, kind="stable")
-        mate = partner[k, track]
-        want = det.frame[0] * n + np.maximum(mate, 0)
-        at = np.minimum(np.searchsorted(key[order], want), key.size - 1)
-        hit = (mate >= 0) & (key[order][at] == want)
-        blob[k, hit] = order[at[hit]]
+        if m_track.size and track.size:
+            blob[k] = blobs_at(det, k + 1, m_track, det.frame[0], partner[k, track])
     return track, blob
+
+
+def blobs_at(det: ClipDetections, view: int, blob_track, frames, tracks) -> np.ndarray:
+    """The blob of ``view`` (global index) that 2D track ``tracks[i]`` holds in frame ``frames[i]``, -1 where it
+    holds none (or ``tracks[i]`` is -1); ``blob_track`` ``(n_v,)``: each blob's track. A 2D track holds at most one
+    blob per frame, so (frame, track) finds one blob, by a sorted search."""
+    frames, tracks = np.asarray(frames, int), np.asarray(tracks, int)
+    out = np.full(tracks.size, -1)
+    if len(blob_track) == 0:
+        return out
+    n = int(blob_track.max()) + 1
+    key = det.frame[view] * n + blob_track
+    order = np.argsort(key, kind="stable")
+    want = frames * n + np.maximum(tracks, 0)
+    at = np.minimum(np.searchsorted(key[order], want), key.size - 1)
+    hit = (tracks >= 0) & (key[order][at] == want)
+    out[hit] = order[at[hit]]
+    return out
 
 
 #: the whole clip's 2D tracks (:func:`blob_tracks`) link a blob this far (a share of the view's typical spacing
@@ -365,16 +374,11 @@ def clip_band_support(det: ClipDetections, camera: Camera, normal, mirror: int, 
     lo = np.searchsorted(d_ids[by_track], direct_track)
     count = np.searchsorted(d_ids[by_track], direct_track, "right") - lo
     pair, blob = np.repeat(np.arange(direct_track.size), count), by_track[spans(lo, count)]
-    n = int(m_ids.max()) + 1
-    key = det.frame[mirror + 1] * n + m_ids
-    order = np.argsort(key, kind="stable")
-    want = det.frame[0][blob] * n + mirror_track[pair]
-    at = np.minimum(np.searchsorted(key[order], want), key.size - 1)
-    hit = key[order][at] == want
-    pair, blob, image = pair[hit], blob[hit], order[at[hit]]
+    image = blobs_at(det, mirror + 1, m_ids, det.frame[0][blob], mirror_track[pair])
+    hit = image >= 0
+    pair, blob, image = pair[hit], blob[hit], image[hit]
     lines = lines_of_normalised(det.norm[0][blob], camera, MirrorPlane(normal=np.asarray(normal, float), d=-1.0))
-    q = camera.ideal_pixels(det.norm[mirror + 1][image])
-    near = np.abs(lines[:, 0] * q[:, 0] + lines[:, 1] * q[:, 1] + lines[:, 2]) <= band_px
+    near = line_distance(lines, camera.ideal_pixels(det.norm[mirror + 1][image])) <= band_px
     return np.bincount(pair[near], minlength=direct_track.size), np.bincount(pair, minlength=direct_track.size)
 
 
