@@ -193,6 +193,7 @@ def test_bake_places_markers_first_seen_later_with_conjecture_unseen(tmp_path, h
     write_c3d(take, labels, pts, 24.0)
     refused = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "no.blend"])
     assert refused.returncode == 2 and "marker count changes" in refused.stderr
+    assert "--conjecture-unseen" in refused.stderr and "--drop-unseen" in refused.stderr   # the two ways out named
     both = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "no.blend",
                  "--drop-unseen", "--conjecture-unseen"])
     assert both.returncode == 2 and "not allowed with" in both.stderr
