@@ -21,6 +21,7 @@ from mirrorcap.synthetic.headsim import performance, synthetic_take
 HEAD_BLEND = ROOT / "sample_scenes" / "generic_head" / "head.blend"
 HEAD_NPZ = ROOT / "sample_scenes" / "generic_head" / "head.npz"
 READBACK = ROOT / "tests" / "blender" / "readback.py"
+TURN_HEAD = ROOT / "tests" / "blender" / "turn_head.py"
 
 
 def _run(args, **kw):
@@ -79,6 +80,35 @@ def test_bake_frames_bound_vertices_follow_their_markers(tmp_path, head_and_keys
     assert np.linalg.norm(seen[:, binding.vertices] - binding.displacements, axis=2).max() < 0.05
     assert np.linalg.norm(seen[:, verts] - disp[:, verts], axis=2)[ok].max() < 0.01
     assert np.linalg.norm(seen - baked, axis=2).max() < 0.01
+
+
+@pytest.mark.parametrize("by", ["landmarks", "surface"])
+def test_bake_onto_a_head_imported_in_centimetres_and_y_up(tmp_path, head_and_keys, by):
+    """A head whose own frame is not Blender's -- its data in centimetres and Y-up, the object scaled 0.01, turned
+    90° about X and standing away from the origin, as an FBX import leaves it (tests/blender/turn_head.py) -- bakes
+    to what the same head gives untouched: the evaluated meshes in world space agree at every keyed frame, the
+    head motion included, registered by landmark labels or by the skin. (Read in its own frame it was a 17 m head
+    lying on its back: the skin registration refused the take, 217 mm RMS, and the landmarks scaled the take onto
+    it.)"""
+    head, keys = head_and_keys
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=150, n_frames=24, seed=8)
+    if by == "surface":
+        labels = [f"m{i:03d}" for i in range(len(labels))]          # no landmark labels: bound by the skin
+    take = tmp_path / "take.c3d"
+    write_c3d(take, labels, pts, 24.0)
+    turned = tmp_path / "turned.blend"
+    res = _run([TURN_HEAD, HEAD_BLEND, turned])
+    assert res.returncode == 0, res.stdout + res.stderr
+    world = {}
+    for name, head_blend in (("plain", HEAD_BLEND), ("turned", turned)):
+        out = tmp_path / f"{name}.blend"
+        res = _run(["-m", "mirrorcap", "bake", take, "--head", head_blend, "-o", out, "--head-motion"])
+        assert res.returncode == 0, res.stdout + res.stderr
+        world[name] = _readback(out, tmp_path)["world"]                 # metres
+    face = np.linalg.norm(world["plain"] - world["plain"][:1], axis=2)
+    assert face.max() > 2e-3                                          # the face and the head move
+    placed = np.array([0.3, -0.2, 1.6])                               # where turn_head.py stands the head
+    assert np.abs(world["turned"] - placed - world["plain"]).max() < 1e-5   # 0.01 mm, at every frame
 
 
 def test_bake_pca_reproduces_a_faceunit_performance_with_eight_modes(tmp_path, head_and_keys):

@@ -16,7 +16,7 @@ import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.face.head import HeadModel
-from .frames import blender_to_core, core_to_blender
+from .frames import blender_to_core, core_to_blender, object_axes
 
 HINGE_PROPERTY = "mirrorcap_jaw_hinge"
 #: the generic head that ships with the extension (HEAD.npz, with its faceunit shape keys)
@@ -60,7 +60,9 @@ def new_head_object(head: HeadModel, shape_keys: dict | None = None, name: str |
 
 
 def read_head(obj) -> HeadModel:
-    """The :class:`HeadModel` of a Blender mesh object (its rest shape, in the object's own frame)."""
+    """The :class:`HeadModel` of a Blender mesh object: its rest shape in core mm, the object's own frame turned
+    and scaled to Blender's axes and metres (:func:`.frames.object_axes`: a head imported in centimetres and Y-up
+    reads as the same head)."""
     if obj is None or obj.type != "MESH":
         raise InputError("the head must be a mesh object")
     mesh = obj.data
@@ -83,28 +85,30 @@ def read_head(obj) -> HeadModel:
         a = np.array(pairs)
         W[a[:, 1].astype(int), a[:, 0].astype(int)] = a[:, 2]
     hinge = obj.get(HINGE_PROPERTY)
-    return HeadModel(vertices=blender_to_core(co.reshape(-1, 3)), polygons=loops, polygon_sizes=sizes,
+    axes = object_axes(obj)
+    return HeadModel(vertices=blender_to_core(co.reshape(-1, 3), axes), polygons=loops, polygon_sizes=sizes,
                      groups=dict(zip(names, W)), name=obj.name,
-                     hinge=None if hinge is None else blender_to_core(np.asarray(hinge, float).reshape(2, 3)))
+                     hinge=None if hinge is None else blender_to_core(np.asarray(hinge, float).reshape(2, 3), axes))
 
 
 def read_shape_keys(obj) -> dict:
     """``{name: (V, 3) offsets in core mm}`` of a mesh object's shape keys (relative to its
-    reference key; the reference itself left out)."""
+    reference key; the reference itself left out), in the frame :func:`read_head` reads the head in."""
     key = obj.data.shape_keys if obj is not None and obj.type == "MESH" else None
     if key is None:
         return {}
     nv = len(obj.data.vertices)
     base = np.empty(nv * 3, np.float32)
     key.reference_key.points.foreach_get("co", base)
-    base = blender_to_core(base.reshape(-1, 3))
+    axes = object_axes(obj)
+    base = blender_to_core(base.reshape(-1, 3), axes)
     out = {}
     co = np.empty(nv * 3, np.float32)
     for kb in key.key_blocks:
         if kb == key.reference_key:
             continue
         kb.points.foreach_get("co", co)
-        out[kb.name] = blender_to_core(co.reshape(-1, 3)) - base
+        out[kb.name] = blender_to_core(co.reshape(-1, 3), axes) - base
     return out
 
 
@@ -158,9 +162,10 @@ def write_head_blend(head: HeadModel, path, shape_keys: dict | None = None) -> N
 
 
 def replace_head_vertices(obj, old_core, new_core) -> None:
-    """Move ``obj``'s rest shape from ``old_core`` to ``new_core`` (core mm); every shape key
-    moves with it, keeping its offsets from the basis."""
-    delta = (core_to_blender(new_core) - core_to_blender(old_core)).astype(np.float32).ravel()
+    """Move ``obj``'s rest shape from ``old_core`` to ``new_core`` (core mm, as :func:`read_head` reads them); every
+    shape key moves with it, keeping its offsets from the basis."""
+    axes = object_axes(obj)
+    delta = (core_to_blender(new_core, axes) - core_to_blender(old_core, axes)).astype(np.float32).ravel()
     mesh = obj.data
     n = len(mesh.vertices) * 3
     if delta.size != n:
@@ -188,5 +193,5 @@ def head_feature_points(obj, head: HeadModel) -> dict:
         base, co = np.empty(nv * 3, np.float32), np.empty(nv * 3, np.float32)
         key.reference_key.points.foreach_get("co", base)
         block.points.foreach_get("co", co)
-        jaw_open = blender_to_core(co.reshape(-1, 3)) - blender_to_core(base.reshape(-1, 3))
+        jaw_open = blender_to_core((co - base).reshape(-1, 3), object_axes(obj))
     return feature_points(head, jaw_open)

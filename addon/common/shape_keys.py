@@ -5,7 +5,9 @@
 constant interpolation so exactly that frame's key is 1 at its frame.
 ``pca``: keys ``mode_01`` .. ``mode_K`` (eigen-deformations, see :mod:`core.face.shapes`) with
 linear-interpolated value keys on every frame; slider range -1..1.
-Head motion (optional): the object's location and quaternion rotation keyed per frame.
+Head motion (optional): the object's location and quaternion rotation keyed per frame, about its own
+location and after its own rotation (a head imported turned and scaled keeps both).
+Coordinates go into the object's own frame (:func:`.frames.object_axes`), as :func:`.headio.read_head` reads them.
 Shape-key coordinates go through ``foreach_set``; keyframes through ``keyframe_points.foreach_set``.
 """
 
@@ -16,7 +18,7 @@ import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.face.shapes import pca_shapes
-from .frames import core_rotation_to_blender, core_to_blender
+from .frames import core_rotation_to_blender, core_to_blender, object_axes
 from .keys import key_fcurves
 
 MODES = ("frames", "pca")
@@ -39,6 +41,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
     F, V = D.shape[:2]
     if V != len(obj.data.vertices):
         raise InputError(f"{V} displacements for a head of {len(obj.data.vertices)} vertices")
+    axes = object_axes(obj)
     _clear_mirrorcap_keys(obj)
     if obj.data.shape_keys is None:
         obj.shape_key_add(name="Basis", from_mix=False)
@@ -55,7 +58,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
         for i, name in enumerate(names):
             kb = obj.shape_key_add(name=name, from_mix=False)
             kb.value = 0.0  # its F-curve sets it to 1 on its own frame only
-            kb.points.foreach_set("co", core_to_blender(neutral_mm + D[i]).astype(np.float32).ravel())
+            kb.points.foreach_set("co", core_to_blender(neutral_mm + D[i], axes).astype(np.float32).ravel())
             if progress and i % 100 == 0:
                 progress(i / F)
         # each key: 0 the frame before, 1 on its frame, 0 the frame after (constant steps)
@@ -67,14 +70,14 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
         for k, name in enumerate(names):
             kb = obj.shape_key_add(name=name, from_mix=False)
             kb.slider_min, kb.slider_max, kb.value = -1.0, 1.0, 0.0
-            kb.points.foreach_set("co", core_to_blender(neutral_mm + pca.modes[k]).astype(np.float32).ravel())
+            kb.points.foreach_set("co", core_to_blender(neutral_mm + pca.modes[k], axes).astype(np.float32).ravel())
         key_fcurves(key, action, names, frames, pca.weights.T, "LINEAR")
         out.update({"modes": int(n_modes), "pca_max_error_mm": pca.max_error_mm, "pca_mean_error_mm": pca.mean_error_mm,
                     "energy": [float(e) for e in pca.energy]})
     if head_motion is not None:
         R, t = head_motion
         Rb = np.array([core_rotation_to_blender(r) for r in R])
-        quat = _quaternions(Rb)
+        quat = _quaternions(Rb @ _rotation_of(np.array(obj.matrix_basis, float)[:3, :3]))
         loc = np.asarray(obj.location)[None] + core_to_blender(t)
         obj.rotation_mode = "QUATERNION"
         obj.animation_data_create()
@@ -90,6 +93,13 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = int(frame_start), int(frame_start + F - 1)
     return out
+
+
+def _rotation_of(linear):
+    """The rotation of a rotation-and-scale matrix ``(3, 3)`` (its polar factor)."""
+    u, _, vt = np.linalg.svd(linear)
+    r = u @ vt
+    return r if np.linalg.det(r) > 0 else u @ np.diag([1.0, 1.0, -1.0]) @ vt
 
 
 def _quaternions(R):

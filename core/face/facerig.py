@@ -48,6 +48,10 @@ REST = "rest"
 JAW_RIDING = ("jaw", "lower_mouth", "lower_lip")
 
 
+#: the grid (mm) of the coordinates the inner lip's columns pick their vertices on (FaceRig._setup_inner_lip)
+SELECTION_GRID_MM = 1e-3
+
+
 @dataclass
 class RigSettings:
     k: float = PAPER_K             # eq. 7.1's kernel constant, mm
@@ -249,25 +253,31 @@ class FaceRig:
             return
         from scipy.spatial import cKDTree
 
+        # the columns' vertices are picked on coordinates rounded to SELECTION_GRID_MM: a symmetric mesh's ties (two
+        # neighbours equally far) then break the same way whatever float noise the head's file frame left on them
+        # (a head imported in centimetres and Y-up: its midline Q0 flipped sides, and the open mouth's inner lip
+        # moved 2 mm otherwise)
+        Vs = np.round(V / SELECTION_GRID_MM) * SELECTION_GRID_MM
         # P0: the outer lip's inner edge; Q0: the outer-lip neighbour of P0 furthest from the inner lip
-        p0 = edge_set[cKDTree(V[edge_set]).query(V[inner])[1]]
+        p0 = edge_set[cKDTree(Vs[edge_set]).query(Vs[inner])[1]]
         nb = {}
         outer_lip = is_lip & ~is_inner
         for a, b in e[(outer_lip[e[:, 0]] & outer_lip[e[:, 1]])]:
             nb.setdefault(a, []).append(b)
             nb.setdefault(b, []).append(a)
-        centre = V[inner].mean(0)
+        centre = np.round(Vs[inner].mean(0) / SELECTION_GRID_MM) * SELECTION_GRID_MM
         q_of = {}
         for p in np.unique(p0):
-            cand = [c for c in nb.get(p, []) if c not in set(edge_set)] or nb.get(p, [p])
-            q_of[p] = max(cand, key=lambda c: np.linalg.norm(V[c] - centre))
+            cand = sorted(c for c in nb.get(p, []) if c not in set(edge_set)) or nb.get(p, [p])
+            far = np.round(np.linalg.norm(Vs[cand] - centre, axis=1) / SELECTION_GRID_MM)
+            q_of[p] = cand[int(np.argmax(far))]          # of equally far ones, the first (lowest index)
         q0 = np.array([q_of[p] for p in p0])
         # P1: the lower-teeth vertex nearest each column's deepest point; B: the teeth vertex below it
         teeth = self.teeth_lower
-        tree = cKDTree(V[teeth])
-        p1 = teeth[tree.query(V[inner])[1]]
+        tree = cKDTree(Vs[teeth])
+        p1 = teeth[tree.query(Vs[inner])[1]]
         down = self.head.face_axes()["down"]
-        b1 = teeth[tree.query(V[p1] + 4.0 * down)[1]]
+        b1 = teeth[tree.query(Vs[p1] + 4.0 * down)[1]]
         d0 = np.linalg.norm(V[inner] - V[p0], axis=1)
         d1 = np.linalg.norm(V[inner] - V[p1], axis=1)
         self.lip_t = d0 / np.maximum(d0 + d1, 1e-9)

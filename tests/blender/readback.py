@@ -2,7 +2,8 @@
 
 argv: OUT.blend OBJECT_NAME OUT.npz -> basis, keys, names, values (each shape key's animated value
 at every scene frame, F-curves evaluated by Blender), frames, fps, and ``evaluated``: the mesh a user
-sees at every scene frame (the depsgraph's evaluated object, all shape keys and modifiers applied).
+sees at every scene frame (the depsgraph's evaluated object, all shape keys and modifiers applied) in the
+object's own frame, and ``world``: the same in world space (the object's animated transform applied).
 """
 import json
 import sys
@@ -33,6 +34,7 @@ names = [kb.name for kb in key.key_blocks if kb.name.startswith(("frame_", "mode
     [kb.name for kb in key.key_blocks if kb.name in fcurves]
 values = np.array([[fcurves[nm].evaluate(f) for nm in names] for f in frames])
 evaluated = np.empty((len(frames), n, 3), np.float32)
+world = np.empty((len(frames), n, 3))
 for i, f in enumerate(frames):
     scene.frame_set(f)
     ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
@@ -40,7 +42,9 @@ for i, f in enumerate(frames):
     co = np.empty(3 * n, np.float32)
     mesh.vertices.foreach_get("co", co)
     evaluated[i] = co.reshape(-1, 3)
+    M = np.array(ev.matrix_world, float)
+    world[i] = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
     ev.to_mesh_clear()
 np.savez(out, basis=blocks[key.reference_key.name], keys=np.stack([blocks[nm] for nm in names]), names=np.array(names),
-         values=values, frames=np.array(frames), fps=scene.render.fps, evaluated=evaluated)
+         values=values, frames=np.array(frames), fps=scene.render.fps, evaluated=evaluated, world=world)
 print(json.dumps({"keys": len(names), "frames": len(frames)}))
