@@ -116,6 +116,29 @@ def test_shape_names_match_case_insensitively():
     assert found == {"jawOpen": "JAWOPEN", "eyeBlinkLeft": "eyeblinkleft"} and missing == ["cheekPuff"]
 
 
+def _exported(name: str) -> str:
+    """An ARKit name as a character exported from another tool may carry it: a blend-shape node's namespace, and a
+    side written _L / _R."""
+    for side, short in (("Left", "_L"), ("Right", "_R")):
+        if name.endswith(side):
+            name = name[: -len(side)] + short
+    return "blendShape1." + name
+
+
+def test_shape_names_match_as_other_tools_spell_them():
+    """Names as characters from other tools carry them: a namespace (Maya's blend-shape node, ``ns:``, ``|``), a
+    side written ``_L`` / ``.R`` / ``_left``, snake case. Each ARKit shape finds its key, and no key serves two."""
+    spelled = {"jawOpen": "blendShape1.jawOpen", "eyeBlinkLeft": "Face:eyeBlink_L", "eyeBlinkRight": "eyeBlink.R",
+               "mouthSmileLeft": "mouth_smile_left", "mouthLeft": "head|mouth_L", "cheekPuff": "CheekPuff"}
+    found, missing = match_shape_names(["Basis", "mouthRollUpper_x", *spelled.values()], list(spelled) + ["mouthRight"])
+    assert found == spelled and missing == ["mouthRight"]
+    every = [_exported(n) for n in ARKIT_SHAPES]
+    found, missing = match_shape_names(every, ARKIT_SHAPES)
+    assert missing == [] and [found[n] for n in ARKIT_SHAPES] == every
+    # an exact name wins over another spelling of it
+    assert match_shape_names(["blendShape1.jawOpen", "jawOpen"], ["jawOpen"])[0] == {"jawOpen": "jawOpen"}
+
+
 def _run(args):
     return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=900, cwd=ROOT,
                           env=dict(os.environ))
@@ -185,6 +208,28 @@ def test_retarget_command_onto_another_character(tmp_path, head_and_keys):
     rb2 = np.load(tmp_path / "rb2.npz")
     assert list(rb2["names"]) == names and np.abs(rb2["values"] - keyed).max() < 1e-5
     assert int(rb2["fps"]) == 30 and np.abs(rb2["evaluated"] - rb["evaluated"]).max() < 1e-5
+
+
+def test_retarget_keys_a_character_whose_shape_names_another_tool_spelled(tmp_path, head_and_keys):
+    """A character exported from another tool, its 52 keys named ``blendShape1.eyeBlink_L`` and the like, is found
+    in its file and keyed with every shape of a Live Link Face take (before: refused, "no mesh with ARKit-named
+    shape keys")."""
+    head, keys = head_and_keys
+    char, keys2 = _character(head, {_exported(n): off for n, off in keys.items()}, tmp_path)
+    rng = np.random.default_rng(3)
+    W = np.clip(rng.normal(0.3, 0.2, (12, len(ARKIT_SHAPES))), 0.0, 1.0)
+    (tmp_path / "take.csv").write_text(livelink_csv(W, ARKIT_SHAPES, 30.0))
+    out = tmp_path / "out.blend"
+    res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.csv", "--target", tmp_path / "target.blend", "-o", out,
+                "--rate", "30", "--report", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["missing_shape_names"] == [] and len(report["shapes_keyed"]) == 52
+    r = _run([ROOT / "tests" / "blender" / "readback.py", out, "Character", tmp_path / "rb.npz"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    rb = np.load(tmp_path / "rb.npz")
+    cols = [[_exported(n) for n in ARKIT_SHAPES].index(name) for name in rb["names"]]
+    assert len(cols) == 52 and np.abs(rb["values"] - W[:, cols]).max() < 1e-4      # each key carries its shape
 
 
 def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):

@@ -24,7 +24,7 @@ from ...core.common.errors import InputError
 from ...core.common.files import write_files_atomically
 from ...core.face.animate import head_pose_from_report, unseen_policy
 from ...core.face.bind import load_marker_map
-from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take
+from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take, shape_name_key
 from ...core.retarget.livelink import livelink_csv, read_livelink_csv
 from ...core.retarget.transfer import TRANSFER_LANDMARKS, transfer_take
 from ...core.take.c3d import read_c3d
@@ -61,9 +61,9 @@ def find_target_object(name: str | None):
             raise InputError(f"the target file has no object named {name!r} "
                              f"(objects: {', '.join(o.name for o in bpy.data.objects) or 'none'})")
         return obj
-    arkit = {n.lower() for n in ARKIT_SHAPES}
+    arkit = {shape_name_key(n) for n in ARKIT_SHAPES}       # as other tools spell them too (blendShape1.jawOpen)
     found = [o for o in bpy.data.objects if o.type == "MESH" and o.data.shape_keys is not None
-             and any(kb.name.lower() in arkit for kb in o.data.shape_keys.key_blocks)]
+             and any(shape_name_key(kb.name) in arkit for kb in o.data.shape_keys.key_blocks)]
     if len(found) == 1:
         return found[0]
     if not found:

@@ -150,13 +150,35 @@ def retarget_take(head, shape_keys: dict, labels, points, *, neutral_frame: int 
     return binding, solve, head_angles(binding.head_motion[0], head.face_axes())
 
 
+def shape_name_key(name: str) -> str:
+    """An ARKit shape name as characters exported from other tools spell it, reduced to one form: a side written
+    ``_L`` / ``_R`` (or ``.l``, ``-R``, ``_left``) at its end read as ``Left`` / ``Right``, the part after the last
+    namespace separator (``blendShape1.jawOpen``, ``Face:jawOpen``, ``mesh|jawOpen``), then lower case without
+    ``_``, ``-`` or spaces: ``eyeBlink_L``, ``EyeBlinkLeft`` and ``eye_blink_left`` are all ``eyeblinkleft``."""
+    import re
+
+    base, side = name.strip(), ""
+    written = re.search(r"(?i)[_.\s-](l|r|left|right)$", base)
+    if written:
+        side = "left" if written.group(1).lower().startswith("l") else "right"
+        base = base[:written.start()]
+    base = re.split(r"[.:|]", base)[-1]
+    return re.sub(r"[_\s-]", "", base).lower() + side
+
+
 def match_shape_names(target_names, names) -> tuple[dict, list]:
-    """``{solved name: target key name}`` matched case-insensitively, and the solved names the
-    target lacks."""
-    by_lower = {}
+    """``{solved name: target key name}`` and the solved names the target lacks. A target key matches when its
+    name is the solved name in any case, else when both reduce to one :func:`shape_name_key` (another tool's
+    spelling: ``blendShape1.jawOpen``, ``eyeBlink_L``, ``mouth_smile_right``); the first such key wins."""
+    by_lower, by_key = {}, {}
     for t in target_names:
         by_lower.setdefault(t.lower(), t)
-    found = {n: by_lower[n.lower()] for n in names if n.lower() in by_lower}
+        by_key.setdefault(shape_name_key(t), t)
+    found = {}
+    for n in names:
+        hit = by_lower.get(n.lower()) or by_key.get(shape_name_key(n))
+        if hit is not None and hit not in found.values():
+            found[n] = hit
     return found, [n for n in names if n not in found]
 
 
