@@ -53,6 +53,7 @@ def _render_preview(objects, frames: int, fps: float, path: Path) -> None:
     """Render the baked heads (actor and character, side by side) from the front to an H.264 file
     (Cycles, CPU, a few samples)."""
     from ..addon.common.frames import core_to_blender
+    from ..addon.common.keys import set_scene_rate
     from ..addon.common.video_out import h264_output
 
     scene = bpy.context.scene
@@ -63,7 +64,7 @@ def _render_preview(objects, frames: int, fps: float, path: Path) -> None:
     scene.cycles.max_bounces = 1
     scene.render.resolution_x, scene.render.resolution_y = PREVIEW_SIZE
     scene.render.resolution_percentage = 100
-    scene.render.fps = max(1, int(round(fps)))
+    set_scene_rate(scene, fps)
     scene.frame_start, scene.frame_end = 1, frames
     scene.view_settings.view_transform = "Standard"
     world = bpy.data.worlds.new("preview") if scene.world is None else scene.world
@@ -106,6 +107,7 @@ def _render_preview(objects, frames: int, fps: float, path: Path) -> None:
 
 def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool = True) -> int:
     from ..addon.common.frames import core_to_blender
+    from ..addon.common.keys import set_scene_rate
     from ..addon.common.shape_keys import bake_displacements
     from ..addon.common.headio import GENERIC_HEAD, new_head_object, save_blend_atomically
     from ..addon.common.take_io import import_take
@@ -204,7 +206,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     char_obj.location = core_to_blender(fitted.vertices.mean(0)) - core_to_blender(character.vertices.mean(0)) \
         + np.array([CHARACTER_OFFSET_M, 0.0, 0.0])
     bake_displacements(char_obj, character.vertices, transfer.displacements, "frames")
-    bpy.context.scene.render.fps = max(1, int(round(fps)))
+    set_scene_rate(bpy.context.scene, fps)
     timings["bake"] = time.perf_counter() - t0
     if preview:
         say("6/6 preview    Cycles (CPU) render of the baked head and the character, side by side")

@@ -111,6 +111,21 @@ def test_bake_onto_a_head_imported_in_centimetres_and_y_up(tmp_path, head_and_ke
     assert np.abs(world["turned"] - placed - world["plain"]).max() < 1e-5   # 0.01 mm, at every frame
 
 
+@pytest.mark.parametrize("rate", [29.97, 59.94, 25.0])
+def test_bake_plays_at_the_takes_rate_exactly(tmp_path, head_and_keys, rate):
+    """A take at a camera's NTSC rate plays at that rate in Blender (fps / fps_base), not rounded to 30 or 60:
+    rounded, the animation ran 0.1 % fast and drifted from the take's sound by 60 ms a minute."""
+    head, keys = head_and_keys
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=120, n_frames=6, seed=4)
+    take = tmp_path / "take.c3d"
+    write_c3d(take, labels, pts, rate)
+    out = tmp_path / "out.blend"
+    res = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", out])
+    assert res.returncode == 0, res.stdout + res.stderr
+    rb = _readback(out, tmp_path)
+    assert abs(float(rb["rate"]) - rate) < 1e-4 and int(rb["fps"]) == int(np.ceil(rate))
+
+
 def test_bake_pca_reproduces_a_faceunit_performance_with_eight_modes(tmp_path, head_and_keys):
     head, keys = head_and_keys
     D, _ = performance(head, keys, 120, fps=30.0, seed=3)

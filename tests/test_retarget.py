@@ -326,6 +326,31 @@ def test_transfer_onto_a_character_without_shape_keys(tmp_path, head_and_keys):
     assert len(up) >= 5 and np.all(sep.min(1) > np.minimum(sep_true.min(1), 0.0) - 0.3)
 
 
+def test_transfer_onto_a_character_imported_in_centimetres_and_y_up(tmp_path, head_and_keys):
+    """The character as an FBX import from a Y-up package in centimetres leaves it (tests/blender/turn_head.py:
+    data in cm and Y-up, the object scaled 0.01, turned 90° and standing elsewhere) takes the same motion as the
+    character untouched: the world-space evaluated meshes agree within 0.01 mm at every frame."""
+    head, keys = head_and_keys
+    labels, pts, _ = arkit_take(head, keys, frames=20, seed=5)
+    write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
+    _character(head, keys, tmp_path, landmarks=True, with_keys=False)
+    turned = tmp_path / "turned.blend"
+    res = _run([ROOT / "tests" / "blender" / "turn_head.py", tmp_path / "target.blend", turned, "Character"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    world = {}
+    for name, target in (("plain", tmp_path / "target.blend"), ("turned", turned)):
+        out = tmp_path / f"{name}.blend"
+        res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.c3d", "--head", HEAD_BLEND, "--target", target,
+                    "-o", out, "--method", "transfer"])
+        assert res.returncode == 0, res.stdout + res.stderr
+        r = _run([ROOT / "tests" / "blender" / "readback.py", out, "Character", tmp_path / f"{name}.npz"])
+        assert r.returncode == 0, r.stdout + r.stderr
+        world[name] = np.load(tmp_path / f"{name}.npz")["world"]
+    assert np.linalg.norm(world["plain"] - world["plain"][:1], axis=2).max() > 2e-3          # the face moves
+    placed = np.array([0.3, -0.2, 1.6])                                                     # turn_head.py's place
+    assert np.abs(world["turned"] - placed - world["plain"]).max() < 1e-5
+
+
 def test_transfer_bad_input_writes_nothing(tmp_path, head_and_keys):
     head, keys = head_and_keys
     labels, pts, _ = arkit_take(head, keys, frames=10, seed=7)

@@ -19,6 +19,7 @@ from ...core.face.bind import load_marker_map
 from ...core.face.facerig import RigSettings
 from ...core.retarget.mpeg4 import read_fap, replay_take
 from ...core.take.c3d import read_c3d
+from ..common.keys import set_scene_rate
 from ..common.shape_keys import MODES, bake_displacements
 from ..common.headio import find_head_object, head_feature_points, open_blend, read_head, save_blend_atomically
 
@@ -73,7 +74,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
     t2 = time.perf_counter()
     out = bake_displacements(obj, head.vertices, D, mode, n_modes, head_motion=binding.head_motion if head_motion else None,
                              progress=progress)
-    bpy.context.scene.render.fps = max(1, int(round(data["rate"])))
+    set_scene_rate(bpy.context.scene, data["rate"])
     timings["bake_s"] = time.perf_counter() - t2
     t3 = time.perf_counter()
     save_blend_atomically(output)

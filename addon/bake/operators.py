@@ -14,6 +14,7 @@ from ...core.common.errors import InputError
 from ..common.inputs import (head_object_from, input_path, required, scene_marker_map, scene_settings,
                              selected_marker_labels)
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
+from ..common.keys import set_scene_rate
 from ..common.properties import BAKE_MODES
 
 
@@ -202,7 +203,7 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
         obj = bpy.data.objects[self._obj_name]
         out = bake_displacements(obj, head.vertices, D, self.mode, self.modes,
                                  head_motion=binding.head_motion if self.head_motion else None)
-        context.scene.render.fps = max(1, int(round(rate)))
+        set_scene_rate(context.scene, rate)
         context.scene.frame_start, context.scene.frame_end = 1, out["frames"]
         extra = f", PCA max error {out['pca_max_error_mm']:.3f} mm" if self.mode == "pca" else ""
         return f"baked {out['frames']} frames onto {obj.name}{extra}"

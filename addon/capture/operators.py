@@ -14,6 +14,7 @@ from bpy.props import IntProperty, StringProperty
 from ...core.common.errors import InputError
 from ..common.inputs import extraction_settings, input_path, required, rig_and_colours, scene_settings
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
+from ..common.keys import set_scene_rate
 
 
 class MIRRORCAP_OT_open_clip(MirrorCapOperator):
@@ -37,7 +38,7 @@ class MIRRORCAP_OT_open_clip(MirrorCapOperator):
         scene_settings(context).video = str(path)
         scene = context.scene
         scene.frame_start, scene.frame_end = 1, max(1, clip.frame_duration)
-        scene.render.fps = max(1, int(round(clip.fps)))
+        set_scene_rate(scene, clip.fps)
         space = getattr(context, "space_data", None)
         if space is not None and space.type == "CLIP_EDITOR":
             space.clip = clip

@@ -1,5 +1,5 @@
 """Keying shape-key values: one F-curve per key, filled with one ``keyframe_points.foreach_set``
-(the bake's frame and PCA keys, the retarget's ARKit weights)."""
+(the bake's frame and PCA keys, the retarget's ARKit weights); and the scene's frame rate."""
 
 from __future__ import annotations
 
@@ -19,3 +19,15 @@ def key_fcurves(key, action, names, frames, values, interpolation: str):
         fc.keyframe_points.foreach_set("co", np.column_stack([fr, vals]).astype(np.float32).ravel())
         fc.keyframe_points.foreach_set("interpolation", np.full(n, interp, np.int32))
         fc.update()
+
+
+def set_scene_rate(scene, rate: float) -> None:
+    """Play ``scene`` at ``rate`` frames/s exactly: Blender's rate is ``fps / fps_base``, so a camera's 29.97 or
+    59.94 (NTSC: 30000/1001, 60000/1001) is 30 or 60 over 1.001 -- rounded to 30 or 60 the animation would run
+    0.1 % fast and drift from the take's sound by 60 ms a minute."""
+    rate = float(rate)
+    if not rate > 0:
+        return
+    fps = max(1, int(np.ceil(rate - 1e-6)))
+    scene.render.fps = fps
+    scene.render.fps_base = fps / rate

@@ -17,6 +17,7 @@ import numpy as np
 
 from ...core.take.c3d import read_c3d
 from .frames import core_to_blender
+from .keys import set_scene_rate
 from .properties import preferences
 
 
@@ -63,5 +64,5 @@ def import_take(context, path, name: str | None = None, data: dict | None = None
             fc.keyframe_points.foreach_set("co", np.column_stack([frames[ok], B[ok, m, axis]]).astype(np.float32).ravel())
             fc.update()
     context.scene.frame_start, context.scene.frame_end = 1, F
-    context.scene.render.fps = max(1, int(round(data["rate"])))
+    set_scene_rate(context.scene, data["rate"])
     return parent

@@ -14,6 +14,7 @@ from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
 from ...core.common.errors import InputError
 from ..common.inputs import head_object_from, input_path, required, scene_marker_map, scene_settings
 from ..common.jobs import MirrorCapJobOperator
+from ..common.keys import set_scene_rate
 from ..common.properties import BAKE_MODES, RETARGET_METHODS
 
 
@@ -109,7 +110,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         character, tr = result
         target = bpy.data.objects[self._target]
         out = bake_displacements(target, character.vertices, tr.displacements, self._mode, self._modes)
-        context.scene.render.fps = max(1, int(round(self._rate)))
+        set_scene_rate(context.scene, self._rate)
         sc = tr.scales
         return (f"transferred {out['frames']} frames onto {target.name} ({self._mode} keys); scales upper "
                 f"{'/'.join(f'{v:.2f}' for v in sc['upper'])}, lower {'/'.join(f'{v:.2f}' for v in sc['lower'])}")
@@ -127,7 +128,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         keyed = key_weights(target, solve.names, solve.weights)
         F = solve.weights.shape[0]
         context.scene.frame_start, context.scene.frame_end = 1, F
-        context.scene.render.fps = max(1, int(round(self._rate)))
+        set_scene_rate(context.scene, self._rate)
         if text is not None:
             write_files_atomically({self._csv: text})
         if keyed["missing"]:

@@ -30,7 +30,7 @@ from ...core.retarget.transfer import TRANSFER_LANDMARKS, transfer_take
 from ...core.take.c3d import read_c3d
 from ..common.shape_keys import MODES, bake_displacements
 from ..common.headio import find_head_object, open_blend, read_head, read_shape_keys, save_blend_atomically
-from ..common.keys import key_fcurves
+from ..common.keys import key_fcurves, set_scene_rate
 
 METHODS = ("arkit", "transfer")
 
@@ -112,7 +112,7 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
     keyed = key_weights(target, table["names"], weights)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, len(weights)
-    scene.render.fps = max(1, int(round(rate)))
+    set_scene_rate(scene, rate)
     save_blend_atomically(output)
     result = {"csv": str(csv_path), "target": str(target_blend), "target_object": target.name, "output": str(output),
               "frames": len(weights), "rate": rate, "shapes_keyed": keyed["keyed"],
@@ -170,7 +170,7 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     keyed = key_weights(target, solve.names, solve.weights)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, F
-    scene.render.fps = max(1, int(round(data["rate"])))
+    set_scene_rate(scene, data["rate"])
     result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
               "target_object": target.name, "output": str(output), "method": method, "frames": F,
               "rate": data["rate"], "markers": len(binding.labels), "registration": binding.registration,
@@ -213,7 +213,7 @@ def run_transfer(take, head_blend, target_blend, output, target_object=None, hea
     keyed = bake_displacements(target_obj, target.vertices, tr.displacements, mode, n_modes,
                                progress=None if progress is None else (lambda f: progress(0.8 + 0.15 * f, "keys")))
     scene = bpy.context.scene
-    scene.render.fps = max(1, int(round(data["rate"])))
+    set_scene_rate(scene, data["rate"])
     t3 = time.perf_counter()
     result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
               "target_object": target_obj.name, "output": str(output), "method": "transfer", "frames": F,

@@ -1,7 +1,7 @@
 """Run with the venv's python: read a baked .blend back with bpy and print JSON.
 
 argv: OUT.blend OBJECT_NAME OUT.npz -> basis, keys, names, values (each shape key's animated value
-at every scene frame, F-curves evaluated by Blender), frames, fps, and ``evaluated``: the mesh a user
+at every scene frame, F-curves evaluated by Blender), frames, fps, rate (fps / fps_base: what Blender plays), and ``evaluated``: the mesh a user
 sees at every scene frame (the depsgraph's evaluated object, all shape keys and modifiers applied) in the
 object's own frame, and ``world``: the same in world space (the object's animated transform applied).
 """
@@ -46,5 +46,6 @@ for i, f in enumerate(frames):
     world[i] = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
     ev.to_mesh_clear()
 np.savez(out, basis=blocks[key.reference_key.name], keys=np.stack([blocks[nm] for nm in names]), names=np.array(names),
-         values=values, frames=np.array(frames), fps=scene.render.fps, evaluated=evaluated, world=world)
+         values=values, frames=np.array(frames), fps=scene.render.fps, rate=scene.render.fps / scene.render.fps_base,
+         evaluated=evaluated, world=world)
 print(json.dumps({"keys": len(names), "frames": len(frames)}))

@@ -1,4 +1,4 @@
-"""Run with the venv's python: HEAD.blend OUT.blend -- the head as an FBX import from a Y-up package in centimetres
+"""Run with the venv's python: HEAD.blend OUT.blend [OBJECT] -- the head (OBJECT, else the mesh with region_* groups) as an FBX import from a Y-up package in centimetres
 leaves it: its data (vertices, every shape key, the jaw hinge) in centimetres and turned -90° about X, the object
 scaled 0.01, turned back 90° and moved to (0.3, -0.2, 1.6) m. In world space it is the same head."""
 import sys
@@ -9,9 +9,10 @@ import numpy as np
 
 src, dst = sys.argv[1], sys.argv[2]
 bpy.ops.wm.open_mainfile(filepath=src, load_ui=False)
-obj = next(o for o in bpy.data.objects if o.type == "MESH" and any(g.name.startswith("region_") for g in o.vertex_groups))
+obj = bpy.data.objects[sys.argv[3]] if len(sys.argv) > 3 else \
+    next(o for o in bpy.data.objects if o.type == "MESH" and any(g.name.startswith("region_") for g in o.vertex_groups))
 own = mathutils.Matrix.Rotation(-np.pi / 2, 4, "X") @ mathutils.Matrix.Scale(100.0, 4)
-obj.data.transform(own, shape_keys=True)
+obj.data.transform(own, shape_keys=obj.data.shape_keys is not None)
 hinge = obj.get("mirrorcap_jaw_hinge")
 if hinge is not None:
     pts = np.asarray(hinge, float).reshape(-1, 3)
