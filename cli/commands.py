@@ -277,8 +277,11 @@ def retarget(args) -> int:
                            report=args.report)
         if not args.quiet:
             print(f"keyed {res['frames']} frames of {args.take} onto {res['target_object']}: "
-                  f"{len(res['shapes_keyed'])} ARKit shapes -> {res['output']}")
+                  f"{len(res['shapes_keyed'])} ARKit shapes at {res['rate']:.3g} frames/s"
+                  f"{' (from its timecodes)' if res['rate_source'] == 'timecodes' else ''} -> {res['output']}")
             _print_missing_shapes(res)
+            for warning in res["warnings"]:
+                print(f"  warning: {warning}")
         return 0
     if not args.head:
         raise MirrorCapError("--head HEAD.blend (the actor's head with the ARKit shape keys) is needed for a C3D take")

@@ -302,7 +302,8 @@ def _blender_commands(sub) -> None:
                                      "feature-distance scaling), keyed as bake keys a head.")
     ret.add_argument("take", help="TAKE.c3d, or a Live Link Face CSV (an iPhone take: its weights are keyed as they are)")
     ret.add_argument("--head", help="HEAD.blend: the actor's head with the 52 ARKit shape keys (for a C3D take)")
-    ret.add_argument("--rate", type=float, default=60.0, help="frames/s of a CSV take (default 60)")
+    ret.add_argument("--rate", type=float, help="frames/s of a CSV take (default: the rows per second its timecodes "
+                     "keep, else 60)")
     ret.add_argument("--head-object", help="the actor's head object (default: the only head in HEAD.blend)")
     ret.add_argument("--target", required=True, help="TARGET.blend: the character")
     ret.add_argument("--target-object", help="the character's mesh (default: the only mesh with ARKit shape keys; "

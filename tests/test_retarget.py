@@ -20,7 +20,8 @@ from mirrorcap.core.face.headfit import subdivide
 from mirrorcap.core.face.headio import load_head_npz, save_head_npz
 from mirrorcap.core.face.head import REGIONS, HeadModel
 from mirrorcap.core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take
-from mirrorcap.core.retarget.livelink import BLEND_SHAPE_COUNT, HEADER, livelink_csv, read_livelink_csv, timecode
+from mirrorcap.core.retarget.livelink import (BLEND_SHAPE_COUNT, HEADER, livelink_csv, read_livelink_csv, timecode,
+                                              timecode_rate)
 from mirrorcap.core.take.c3d import write_c3d
 from mirrorcap.synthetic.headsim import ARKIT_CHANNELS as CHANNELS
 from mirrorcap.synthetic.headsim import arkit_take
@@ -230,6 +231,36 @@ def test_retarget_keys_a_character_whose_shape_names_another_tool_spelled(tmp_pa
     rb = np.load(tmp_path / "rb.npz")
     cols = [[_exported(n) for n in ARKIT_SHAPES].index(name) for name in rb["names"]]
     assert len(cols) == 52 and np.abs(rb["values"] - W[:, cols]).max() < 1e-4      # each key carries its shape
+
+
+def test_timecodes_tell_a_csv_takes_rate():
+    """The rows per second of the clock, over the seconds a take spans whole; None where they cannot tell."""
+    for rate in (24.0, 30.0, 60.0):
+        assert timecode_rate([timecode(f, rate) for f in range(int(4.5 * rate))]) == rate
+    assert abs(timecode_rate([timecode(f + 17, 29.97) for f in range(400)]) - 29.97) < 0.05
+    assert timecode_rate([timecode(f, 60.0) for f in range(50)]) is None            # not one whole second
+    assert timecode_rate(["00:00:01:02.000", "00:00:00:03.000", "00:00:02:00.000"]) is None    # backwards
+    assert timecode_rate(["1:2", "00:00:02:00.000"]) is None
+
+
+def test_retarget_plays_a_csv_take_at_the_rate_its_timecodes_keep(tmp_path, head_and_keys):
+    """A Live Link Face take recorded at 30 frames/s plays at 30 without --rate (before: at 60, twice as fast,
+    silently); a --rate that disagrees with the timecodes is kept, with a warning."""
+    head, keys = head_and_keys
+    _character(head, keys, tmp_path)
+    W = np.clip(np.random.default_rng(4).normal(0.3, 0.2, (100, len(ARKIT_SHAPES))), 0.0, 1.0)
+    (tmp_path / "take.csv").write_text(livelink_csv(W, ARKIT_SHAPES, 30.0))
+    for extra, rate, source in (([], 30.0, "timecodes"), (["--rate", "60"], 60.0, "--rate")):
+        out = tmp_path / f"out{rate:g}.blend"
+        res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.csv", "--target", tmp_path / "target.blend",
+                    "-o", out, "--report", tmp_path / "r.json", *extra])
+        assert res.returncode == 0, res.stdout + res.stderr
+        report = json.loads((tmp_path / "r.json").read_text())
+        assert report["rate"] == rate and report["rate_source"] == source and report["timecode_rate"] == 30.0
+        assert bool(report["warnings"]) == (rate == 60.0) and ("warning: --rate 60" in res.stdout) == (rate == 60.0)
+        r = _run([ROOT / "tests" / "blender" / "readback.py", out, "Character", tmp_path / "rb.npz"])
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert abs(float(np.load(tmp_path / "rb.npz")["rate"]) - rate) < 1e-6
 
 
 def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):

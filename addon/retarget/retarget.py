@@ -25,7 +25,7 @@ from ...core.common.files import write_files_atomically
 from ...core.face.animate import head_pose_from_report, unseen_policy
 from ...core.face.bind import load_marker_map
 from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take, shape_name_key
-from ...core.retarget.livelink import livelink_csv, read_livelink_csv
+from ...core.retarget.livelink import livelink_csv, read_livelink_csv, timecode_rate
 from ...core.retarget.transfer import TRANSFER_LANDMARKS, transfer_take
 from ...core.take.c3d import read_c3d
 from ..common.shape_keys import MODES, bake_displacements
@@ -95,18 +95,37 @@ def key_weights(obj, solved_names, weights, frame_start: int = 1) -> dict:
     return {"keyed": targets, "missing": missing}
 
 
-def run_livelink(csv_path, target_blend, output, target_object=None, rate: float = 60.0, report=None) -> dict:
+#: a Live Link Face take's rate when neither --rate nor its timecodes tell it (the app records at 60 frames/s)
+LIVELINK_DEFAULT_RATE = 60.0
+#: --rate and the timecodes' rate further apart than this share are warned about (run_livelink)
+RATE_DISAGREEMENT = 0.02
+
+
+def run_livelink(csv_path, target_blend, output, target_object=None, rate: float | None = None, report=None) -> dict:
     """Key a character from a Live Link Face CSV (an iPhone take, or one MirrorCap wrote): its
-    52 weights on the target's shape keys of the same names, one CSV row per frame."""
+    52 weights on the target's shape keys of the same names, one CSV row per frame. The scene plays at ``rate``,
+    else at the rate the rows' timecodes keep (:func:`core.retarget.livelink.timecode_rate`), else at
+    :data:`LIVELINK_DEFAULT_RATE`; ``rate_source`` says which, and ``warnings`` a ``rate`` that disagrees with the
+    timecodes (a 30 frames/s take played at 60 runs twice as fast)."""
     for path in (output, report):
         if path is not None and not Path(path).resolve().parent.is_dir():
             raise InputError(f"output folder {Path(path).resolve().parent} does not exist")
-    if not rate > 0:
+    if rate is not None and not rate > 0:
         raise InputError("--rate must be positive")
     table = read_livelink_csv(csv_path)
     weights = np.clip(table["weights"], 0.0, 1.0)
     if not len(weights):
         raise InputError(f"{csv_path} has no frames")
+    kept = timecode_rate(table["timecodes"])
+    warnings = []
+    if rate is None:
+        rate, source = (kept, "timecodes") if kept else (LIVELINK_DEFAULT_RATE, "default")
+    else:
+        source = "--rate"
+        if kept and abs(rate / kept - 1.0) > RATE_DISAGREEMENT:
+            warnings.append(f"--rate {rate:g} but the CSV's timecodes keep {kept:.2f} rows a second: the animation "
+                            f"plays {rate / kept:.2f} times as fast as it was recorded (leave --rate out to follow "
+                            "the timecodes)")
     open_blend(target_blend)
     target = find_target_object(target_object)
     keyed = key_weights(target, table["names"], weights)
@@ -115,8 +134,9 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
     set_scene_rate(scene, rate)
     save_blend_atomically(output)
     result = {"csv": str(csv_path), "target": str(target_blend), "target_object": target.name, "output": str(output),
-              "frames": len(weights), "rate": rate, "shapes_keyed": keyed["keyed"],
-              "missing_shape_names": keyed["missing"], "missing_csv_columns": table["missing_columns"]}
+              "frames": len(weights), "rate": rate, "rate_source": source, "timecode_rate": kept,
+              "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"],
+              "missing_csv_columns": table["missing_columns"], "warnings": warnings}
     if report is not None:
         write_files_atomically({Path(report): json.dumps(result, indent=1) + "\n"})
     return result

@@ -51,6 +51,27 @@ def livelink_csv(weights, names, rate: float, head=None, eyes=None) -> str:
     return HEADER + "\n" + "\n".join(rows) + "\n"
 
 
+def timecode_rate(timecodes) -> float | None:
+    """A take's frame rate from its rows' ``HH:MM:SS:FF.mmm`` timecodes: the rows per second of the clock, averaged
+    over the seconds the take spans whole (its first and last are cut). None when it spans no whole second, or a
+    timecode cannot be read or runs backwards (a take across midnight)."""
+    seconds = []
+    for code in timecodes:
+        parts = str(code).strip().split(":")
+        try:
+            h, m, s = (int(v) for v in parts[:3])
+        except ValueError:
+            return None
+        if len(parts) != 4:
+            return None
+        seconds.append(3600 * h + 60 * m + s)
+    seconds = np.asarray(seconds)
+    if seconds.size < 2 or np.any(np.diff(seconds) < 0):
+        return None
+    whole = np.unique(seconds, return_counts=True)[1][1:-1]
+    return float(whole.mean()) if whole.size else None
+
+
 def read_livelink_csv(path) -> dict:
     """``{"names": ARKit names (camelCase), "weights" (F, 52), "rotations" (F, 9), "timecodes"}``
     from a Live Link Face CSV (columns found by name, so any order the app used)."""
