@@ -82,14 +82,15 @@ def test_bake_frames_bound_vertices_follow_their_markers(tmp_path, head_and_keys
     assert np.linalg.norm(seen - baked, axis=2).max() < 0.01
 
 
-@pytest.mark.parametrize("by", ["landmarks", "surface"])
-def test_bake_onto_a_head_imported_in_centimetres_and_y_up(tmp_path, head_and_keys, by):
+@pytest.mark.parametrize("by, parented", [("landmarks", False), ("surface", False), ("landmarks", True)])
+def test_bake_onto_a_head_imported_in_centimetres_and_y_up(tmp_path, head_and_keys, by, parented):
     """A head whose own frame is not Blender's -- its data in centimetres and Y-up, the object scaled 0.01, turned
     90° about X and standing away from the origin, as an FBX import leaves it (tests/blender/turn_head.py) -- bakes
     to what the same head gives untouched: the evaluated meshes in world space agree at every keyed frame, the
     head motion included, registered by landmark labels or by the skin. (Read in its own frame it was a 17 m head
     lying on its back: the skin registration refused the take, 217 mm RMS, and the landmarks scaled the take onto
-    it.)"""
+    it.) ``parented``: the head is also parented to a turned and moved empty, as a character's meshes are to its
+    armature; the head motion is then keyed in the parent's frame."""
     head, keys = head_and_keys
     labels, pts, *_ = synthetic_take(head, keys, n_markers=150, n_frames=24, seed=8)
     if by == "surface":
@@ -97,7 +98,7 @@ def test_bake_onto_a_head_imported_in_centimetres_and_y_up(tmp_path, head_and_ke
     take = tmp_path / "take.c3d"
     write_c3d(take, labels, pts, 24.0)
     turned = tmp_path / "turned.blend"
-    res = _run([TURN_HEAD, HEAD_BLEND, turned])
+    res = _run([TURN_HEAD, HEAD_BLEND, turned, *(["--parent"] if parented else [])])
     assert res.returncode == 0, res.stdout + res.stderr
     world = {}
     for name, head_blend in (("plain", HEAD_BLEND), ("turned", turned)):

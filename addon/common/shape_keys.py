@@ -6,7 +6,8 @@ constant interpolation so exactly that frame's key is 1 at its frame.
 ``pca``: keys ``mode_01`` .. ``mode_K`` (eigen-deformations, see :mod:`core.face.shapes`) with
 linear-interpolated value keys on every frame; slider range -1..1.
 Head motion (optional): the object's location and quaternion rotation keyed per frame, about its own
-location and after its own rotation (a head imported turned and scaled keeps both).
+location and after its own rotation (a head imported turned and scaled keeps both; one parented to a rig is keyed in
+its parent's frame).
 Coordinates go into the object's own frame (:func:`.frames.object_axes`), as :func:`.headio.read_head` reads them.
 Shape-key coordinates go through ``foreach_set``; keyframes through ``keyframe_points.foreach_set``.
 """
@@ -75,10 +76,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
         out.update({"modes": int(n_modes), "pca_max_error_mm": pca.max_error_mm, "pca_mean_error_mm": pca.mean_error_mm,
                     "energy": [float(e) for e in pca.energy]})
     if head_motion is not None:
-        R, t = head_motion
-        Rb = np.array([core_rotation_to_blender(r) for r in R])
-        quat = _quaternions(Rb @ _rotation_of(np.array(obj.matrix_basis, float)[:3, :3]))
-        loc = np.asarray(obj.location)[None] + core_to_blender(t)
+        loc, quat = _head_motion_keys(obj, *head_motion)
         obj.rotation_mode = "QUATERNION"
         obj.animation_data_create()
         oact = bpy.data.actions.new(f"{obj.name}_head_motion")
@@ -95,11 +93,26 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
     return out
 
 
+def _head_motion_keys(obj, R, t):
+    """The location ``(F, 3)`` and rotation quaternions ``(F, 4)`` to key on ``obj`` so that it moves by the head
+    motion ``R (F, 3, 3)``, ``t (F, 3)`` (core; about the object's origin, in world axes, as :func:`.headio.read_head`
+    reads the head) from where it stands: at frame f its world matrix is ``[R_f A | o + t_f]`` (``A`` its linear
+    part, ``o`` its origin), expressed in the frame its own transform lives in -- its parent's, for a head parented
+    to a rig. Its scale stays as it is."""
+    world = np.array(obj.matrix_world, float)
+    parent = world @ np.linalg.inv(np.array(obj.matrix_basis, float))      # identity when not parented
+    moved = np.tile(np.eye(4), (len(R), 1, 1))
+    moved[:, :3, :3] = np.array([core_rotation_to_blender(r) for r in R]) @ world[:3, :3]
+    moved[:, :3, 3] = world[:3, 3] + core_to_blender(t)
+    basis = np.linalg.inv(parent) @ moved
+    return basis[:, :3, 3], _quaternions(_rotation_of(basis[:, :3, :3]))
+
+
 def _rotation_of(linear):
-    """The rotation of a rotation-and-scale matrix ``(3, 3)`` (its polar factor)."""
+    """The rotations of rotation-and-scale matrices ``(..., 3, 3)`` (their polar factors)."""
     u, _, vt = np.linalg.svd(linear)
-    r = u @ vt
-    return r if np.linalg.det(r) > 0 else u @ np.diag([1.0, 1.0, -1.0]) @ vt
+    u[..., :, -1] *= np.sign(np.linalg.det(u @ vt))[..., None]
+    return u @ vt
 
 
 def _quaternions(R):
