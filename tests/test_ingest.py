@@ -70,6 +70,27 @@ def test_high_bit_depth_and_float_images(tmp_path):
     assert g.shape == (4, 4, 3)
 
 
+@pytest.mark.parametrize("bits", [8, 10, 12, 14, 16])
+def test_a_16_bit_sequence_keeps_its_range_whatever_bits_its_samples_use(tmp_path, bits):
+    """A machine-vision camera's samples stored low in 16-bit files (a 12-bit camera: values up to 4095) read as
+    the same 8-bit frames as the full-range files (before: shifted by 8 bits, a 12-bit sequence came out almost
+    black, at most 15, and detection found no marker)."""
+    from mirrorcap.core.capture.video import sample_bits
+
+    rng = np.random.default_rng(bits)
+    frames8 = [rng.integers(0, 256, (12, 16, 3)).astype(np.uint8) for _ in range(5)]
+    frames8[2][0, 0] = 255                                  # the brightest sample sits in the middle image
+    frames8[0][:] = np.minimum(frames8[0], 20)              # a dark first frame (a slate) does not decide it alone
+    for k, im in enumerate(frames8):
+        stored = (im.astype(np.uint16) << (bits - 8)) + (rng.integers(0, 1 << (bits - 8), im.shape) if bits > 8 else 0)
+        cv2.imwrite(str(tmp_path / f"f_{k}.png"), stored.astype(np.uint16))
+    source = open_source(tmp_path)
+    assert source.bits == bits
+    for (_, got), want in zip(source.frames(), frames8):
+        assert np.array_equal(got, want)
+    assert sample_bits([np.full((2, 2), 4095, np.uint16)]) == 12 and sample_bits([np.zeros((2, 2), np.uint16)]) == 8
+
+
 def test_video_bad_input(tmp_path):
     (tmp_path / "empty.mp4").write_bytes(b"")
     (tmp_path / "text.mp4").write_text("not a video at all\n" * 10)

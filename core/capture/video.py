@@ -7,7 +7,9 @@ Sources:
 * a glob pattern such as ``shots/take3_*.png``.
 
 Frames come out as 8-bit BGR arrays ``(height, width, 3)``; 16-bit and float
-images (EXR) are scaled to 8 bits (float: 0..1 -> 0..255, clipped). Frames are
+images (EXR) are scaled to 8 bits (float: 0..1 -> 0..255, clipped). A 16-bit sequence is scaled by the
+bits its samples use (:func:`sample_bits`, from its first, middle and last images): a machine-vision
+camera's 10-, 12- or 14-bit samples stored low in 16-bit files keep their range. Frames are
 read one at a time -- a clip is never held in memory.
 
 A frame selection is ``start:end`` (end exclusive, either side optional) plus a
@@ -50,13 +52,26 @@ def parse_frame_range(text: str | None) -> tuple[int, int | None]:
     return start, end
 
 
-def to_bgr8(image: np.ndarray) -> np.ndarray:
-    """Any OpenCV-read image -> 8-bit, 3-channel BGR."""
+#: the sample depths a 16-bit image may carry (:func:`sample_bits`)
+SAMPLE_BITS = (8, 10, 12, 14, 16)
+
+
+def sample_bits(images) -> int:
+    """The bits the samples of 16-bit ``images`` use: the least of :data:`SAMPLE_BITS` that holds their largest
+    value (a 12-bit camera's data stored low in 16-bit files: 12; scaled to the full range: 16)."""
+    top = max((int(im.max()) for im in images if im is not None and im.size), default=0)
+    need = max(top, 1).bit_length()
+    return next((b for b in SAMPLE_BITS if b >= need), 16)
+
+
+def to_bgr8(image: np.ndarray, bits: int = 16) -> np.ndarray:
+    """Any OpenCV-read image -> 8-bit, 3-channel BGR; a 16-bit one's samples use ``bits`` (:func:`sample_bits`),
+    and any above that range saturate."""
     import cv2
 
     img = image
     if img.dtype == np.uint16:
-        img = (img >> 8).astype(np.uint8)
+        img = np.minimum(img >> max(int(bits) - 8, 0), 255).astype(np.uint8)
     elif img.dtype in (np.float32, np.float64):
         img = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
     elif img.dtype != np.uint8:
@@ -78,6 +93,7 @@ class VideoSource:
     frame_count: int
     size: tuple[int, int]  # (width, height)
     files: list | None = None
+    bits: int = 16  # a 16-bit image sequence's sample depth (sample_bits)
 
     def compression(self) -> dict | None:
         """How hard a video file is compressed: ``{"mbit_per_s", "bits_per_pixel"}`` -- the file's bits per
@@ -113,7 +129,7 @@ class VideoSource:
                 img = cv2.imread(self.files[n], cv2.IMREAD_UNCHANGED)
                 if img is None:
                     raise InputError(f"cannot read image {self.files[n]}")
-                img = to_bgr8(img)
+                img = to_bgr8(img, self.bits)
                 if (img.shape[1], img.shape[0]) != self.size:
                     raise InputError(f"image {self.files[n]} is {img.shape[1]}x{img.shape[0]}, "
                                      f"the sequence is {self.size[0]}x{self.size[1]}")
@@ -204,9 +220,13 @@ def open_source(path, fps: float | None = None) -> VideoSource:
         first = cv2.imread(files[0], cv2.IMREAD_UNCHANGED)
         if first is None:
             raise InputError(f"cannot read image {files[0]}")
-        first = to_bgr8(first)
+        bits = 16
+        if first.dtype == np.uint16:   # the sequence's sample depth, from its first, middle and last images
+            bits = sample_bits([first] + [cv2.imread(files[k], cv2.IMREAD_UNCHANGED)
+                                          for k in sorted({len(files) // 2, len(files) - 1} - {0})])
+        first = to_bgr8(first, bits)
         return VideoSource(path=text, kind="images", fps=float(fps or DEFAULT_IMAGE_FPS), frame_count=len(files),
-                           size=(first.shape[1], first.shape[0]), files=files)
+                           size=(first.shape[1], first.shape[0]), files=files, bits=bits)
     if not p.is_file():
         raise InputError(f"no such video, folder or image pattern: {text}")
     if p.stat().st_size == 0:
