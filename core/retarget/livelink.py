@@ -58,11 +58,11 @@ def timecode_rate(timecodes) -> float | None:
     seconds = []
     for code in timecodes:
         parts = str(code).strip().split(":")
+        if len(parts) != 4:
+            return None
         try:
             h, m, s = (int(v) for v in parts[:3])
         except ValueError:
-            return None
-        if len(parts) != 4:
             return None
         seconds.append(3600 * h + 60 * m + s)
     seconds = np.asarray(seconds)
