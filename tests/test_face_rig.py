@@ -300,6 +300,17 @@ def test_bind_removes_head_motion_and_places_the_take_on_the_head(head_and_keys)
         assert np.abs(b.displacements - disp[:, verts]).max() < (1e-6 if given is not None else 0.05)
 
 
+def test_bind_reads_landmark_labels_as_other_systems_write_them(head_and_keys):
+    """``Actor1:LM_Nose_Tip`` (a Vicon subject's prefix, another case) names the landmark ``nose_tip``: the take
+    binds by its landmarks as with our own labels (before: by the skin, or refused where the skin cannot tell)."""
+    head, keys = head_and_keys
+    labels, pts, verts, disp, pose = synthetic_take(head, keys, n_markers=120, n_frames=20, seed=3)
+    theirs = [f"Actor1:{name.upper() if k % 2 else name.title()}" for k, name in enumerate(labels)]
+    ours, b = bind_take(head, labels, pts, head_pose=pose), bind_take(head, theirs, pts, head_pose=pose)
+    assert b.registration == ours.registration == "landmarks" and len(b.landmarks_used) == len(ours.landmarks_used) >= 3
+    assert np.array_equal(b.vertices, verts) and np.abs(b.displacements - ours.displacements).max() < 1e-9
+
+
 def test_bind_with_a_scaled_turned_take_and_gaps(head_and_keys):
     head, keys = head_and_keys
     labels, pts, verts, disp, pose = synthetic_take(head, keys, n_markers=120, n_frames=40, seed=4)

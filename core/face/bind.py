@@ -7,7 +7,7 @@
    Eisert, section 3.3: markers that deform get down-weighted).
 2. One similarity transform from the take's neutral frame to the head. Where at least
    three markers' labels name a landmark of the head (``nose_tip`` or ``lm_nose_tip``
-   for the group ``lm_nose_tip``), they anchor it (Umeyama). Otherwise -- the labels
+   for the group ``lm_nose_tip``, in any case, after a subject's prefix such as Vicon's ``Actor1:``), they anchor it (Umeyama). Otherwise -- the labels
    ``m000``.. of a fully automatic take -- the markers register to the head's skin
    surface by similarity ICP (:func:`register_to_surface`), started from a frontal
    face (the head model is authored facing the camera, as the subject in the rig).
@@ -228,8 +228,13 @@ def resolve_marker_map(marker_map: dict, labels, head: HeadModel) -> np.ndarray:
 
 
 def _landmark_of(label: str, landmarks: dict):
-    name = label[3:] if label.startswith("lm_") else label
-    return name if name in landmarks else None
+    """The landmark a take's marker ``label`` names, or None: ``nose_tip`` or ``lm_nose_tip``, in any case, after a
+    subject's prefix as other systems write it (Vicon's ``Actor1:nose_tip``)."""
+    name = label.rsplit(":", 1)[-1].strip()
+    name = name[3:] if name.lower().startswith("lm_") else name
+    if name in landmarks:
+        return name
+    return next((k for k in landmarks if k.lower() == name.lower()), None)
 
 
 def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose=None,
