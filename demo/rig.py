@@ -138,7 +138,8 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     camera = Camera.load(sample / "camera.json")
     source = open_source(sample / "clip.mp4")
     take_path, report_path = out_dir / "take.c3d", out_dir / "take_report.json"
-    say(f"1/5 track      {sample / 'clip.mp4'} ({source.frame_count} frames, {source.size[0]}x{source.size[1]})")
+    steps = 6 if preview else 5                                  # the preview is the sixth
+    say(f"1/{steps} track      {sample / 'clip.mp4'} ({source.frame_count} frames, {source.size[0]}x{source.size[1]})")
     report = _step("track", timings, run_track, source, camera, take_path, report=report_path,
                    layout=load_rig_views(sample / "rig.json"))
     take = read_c3d(take_path)
@@ -146,7 +147,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     fps = float(take["rate"])
 
     # 2. fit the generic head to the scan
-    say("2/6 fit        generic head -> sample scan")
+    say(f"2/{steps} fit        generic head -> sample scan")
     head, keys = load_head_npz(GENERIC_HEAD, with_shape_keys=True)
     scan_V, scan_T = read_scan(sample / "scan.ply")
     fit = _step("fit", timings, fit_head, head, scan_V, scan_T, read_landmarks(sample / "scan_landmarks.json"))
@@ -158,8 +159,8 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     fit_err = np.linalg.norm(fit.vertices - true_scan, axis=1)[face]
 
     # 3. bind (with the tracker's head pose) and 4. rig
-    say("3/6 bind       take -> fitted head (skin-surface registration)")
-    say("4/6 rig+bake   face rig on every frame -> shape keys")
+    say(f"3/{steps} bind       take -> fitted head (skin-surface registration)")
+    say(f"4/{steps} rig+bake   face rig on every frame -> shape keys")
     pose = head_pose_from_report(report_path, take["points"].shape[0])
     anim = animate_take(fitted, take["labels"], take["points"], fps, head_pose=pose, unseen="conjecture",
                         settings=RigSettings(blinks=True))
@@ -185,7 +186,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
                            float(np.sqrt(np.mean(np.sum(true_disp[:, m] ** 2, axis=2))))))
 
     # 5. retarget: the take's motion onto the second character (landmarks only, no shape keys)
-    say("5/6 retarget   take -> second character (motion transfer)")
+    say(f"5/{steps} retarget   take -> second character (motion transfer)")
     character, character_keys = load_head_npz(CHARACTER, with_shape_keys=True)
     transfer = _step("retarget", timings, transfer_take, fitted, keys, character, take["labels"], take["points"],
                      fps, head_pose=pose, unseen="conjecture")
@@ -209,7 +210,7 @@ def run_demo(out_dir, quiet: bool = False, sample: Path = SAMPLE, preview: bool 
     set_scene_rate(bpy.context.scene, fps)
     timings["bake"] = time.perf_counter() - t0
     if preview:
-        say("6/6 preview    Cycles (CPU) render of the baked head and the character, side by side")
+        say(f"6/{steps} preview    Cycles (CPU) render of the baked head and the character, side by side")
         tmp_video = out_dir / ".preview.tmp.mp4"
         _step("preview", timings, _render_preview, [obj, char_obj], D.shape[0], fps, tmp_video)
     import_take(bpy.context, take_path, name="sample")
