@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.common.errors import InputError
+
 MM_PER_BLENDER_UNIT = 1000.0
 
 
@@ -43,8 +45,6 @@ def core_to_blender(points, axes=None) -> np.ndarray:
 def object_axes(obj) -> np.ndarray:
     """The linear part ``(3, 3)`` of ``obj``'s world matrix (rotation and scale, its location left out):
     ``world - location = axes @ own``. A head whose scale is zero in some axis is refused."""
-    from ...core.common.errors import InputError
-
     axes = np.array(obj.matrix_world, float)[:3, :3]
     if not abs(np.linalg.det(axes)) > 1e-12:
         raise InputError(f"{obj.name!r} is scaled to nothing along some axis (its scale {tuple(obj.scale)}): "

@@ -19,6 +19,7 @@ in/out and up/down) keep only their difference, and ``mouthClose <= jawOpen``.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -155,8 +156,6 @@ def shape_name_key(name: str) -> str:
     ``_L`` / ``_R`` (or ``.l``, ``-R``, ``_left``) at its end read as ``Left`` / ``Right``, the part after the last
     namespace separator (``blendShape1.jawOpen``, ``Face:jawOpen``, ``mesh|jawOpen``), then lower case without
     ``_``, ``-`` or spaces: ``eyeBlink_L``, ``EyeBlinkLeft`` and ``eye_blink_left`` are all ``eyeblinkleft``."""
-    import re
-
     base, side = name.strip(), ""
     written = re.search(r"(?i)[_.\s-](l|r|left|right)$", base)
     if written:
