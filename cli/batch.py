@@ -31,9 +31,9 @@ def _bake_one(job):
         res = run_bake(take, head, Path(out_dir) / f"{stem}.blend", object_name=options["object"],
                        mode=options["mode"], n_modes=options["modes"], neutral_frame=options["neutral_frame"],
                        head_motion=options["head_motion"], settings=settings,
-                       report=Path(out_dir) / f"{stem}.bake.json", drop_unseen=options["drop_unseen"],
-                       conjecture_unseen=options.get("conjecture_unseen", False),
-                       marker_map=options.get("marker_map"))
+                       report=Path(out_dir) / f"{stem}.bake.json", unseen=options.get("unseen", "conjecture"),
+                       marker_map=options.get("marker_map"), frames=options.get("frames"),
+                       frame_start=options.get("frame_start", 1))
         out = {"take": str(take), "ok": True, "output": res["output"], "frames": res["frames"]}
     except MirrorCapError as exc:
         out = {"take": str(take), "ok": False, "error": str(exc)}

@@ -229,7 +229,15 @@ def demo_mirrors(args) -> int:
     return run_demo(Path(args.out), quiet=args.quiet)
 
 
+def _take_frames(args) -> tuple[int, int | None]:
+    """``--frames START:END`` of ``bake`` and ``batch``, read before Blender starts."""
+    from ..core.capture.video import parse_frame_range
+
+    return parse_frame_range(args.frames)
+
+
 def bake(args) -> int:
+    frames = _take_frames(args)
     with interrupts_held():     # Blender loads here (cli/interrupts.py)
         from ..addon.bake.bake import run_bake
     from ..core.face.facerig import RigSettings
@@ -244,10 +252,13 @@ def bake(args) -> int:
         raise MirrorCapError("give either a take (TAKE.c3d) or --fap TAKE.fap")
     res = run_bake(args.take, args.head, args.output, object_name=args.object, mode=args.mode, n_modes=args.modes,
                    neutral_frame=args.neutral_frame, head_pose_report=args.head_pose, head_motion=args.head_motion,
-                   settings=settings, report=args.report, drop_unseen=args.drop_unseen,
-                   conjecture_unseen=args.conjecture_unseen, marker_map=args.marker_map, fap=args.fap)
+                   settings=settings, report=args.report, unseen=args.unseen, marker_map=args.marker_map, fap=args.fap,
+                   frames=frames, frame_start=args.frame_start)
     if not args.quiet:
-        line = (f"baked {res['frames']} frames onto {res['object']} ({res['vertices']} vertices) as "
+        first, end = res["take_frames"]
+        line = (f"baked {res['frames']} frames{'' if (first, end) == (0, res['take_length']) else f' ({first}:{end})'} "
+                f"onto {res['object']} ({res['vertices']} vertices) at scene frames {res['frame_start']}-"
+                f"{res['frame_start'] + res['frames'] - 1} as "
                 f"{'one shape key per frame' if res['mode'] == 'frames' else str(res['modes']) + ' PCA modes'}")
         if res["mode"] == "pca":
             line += f"; PCA error max {res['pca_max_error_mm']:.3f} mm, mean {res['pca_mean_error_mm']:.4f} mm"
@@ -257,6 +268,8 @@ def bake(args) -> int:
         print(f"  {res['markers']} markers registered by {how} (RMS {res['landmark_rms_mm']:.2f} mm), "
               f"binding distance max {res['binding_distance_mm']['max']:.2f} mm")
         print(f"  {res['timings_s']['total_s']:.2f} s -> {res['output']}")
+        for warning in res["warnings"]:
+            print(f"  warning: {warning}")
     return 0
 
 
@@ -274,7 +287,7 @@ def retarget(args) -> int:
         if args.csv:
             raise MirrorCapError("--csv writes the CSV of a C3D take; the take is already a CSV")
         res = run_livelink(args.take, args.target, args.output, target_object=args.target_object, rate=args.rate,
-                           report=args.report)
+                           report=args.report, frame_start=args.frame_start)
         if not args.quiet:
             print(f"keyed {res['frames']} frames of {args.take} onto {res['target_object']}: "
                   f"{len(res['shapes_keyed'])} ARKit shapes at {res['rate']:.3g} frames/s"
@@ -290,8 +303,8 @@ def retarget(args) -> int:
     res = run_retarget(args.take, args.head, args.target, args.output, target_object=args.target_object,
                        method=args.method, csv=args.csv, head_pose_report=args.head_pose, report=args.report,
                        marker_map=args.marker_map, neutral_frame=args.neutral_frame, smoothness=args.smoothness,
-                       head_object=args.head_object, drop_unseen=args.drop_unseen,
-                       conjecture_unseen=args.conjecture_unseen, mode=args.mode, n_modes=args.modes)
+                       head_object=args.head_object, unseen=args.unseen, mode=args.mode, n_modes=args.modes,
+                       frame_start=args.frame_start)
     if args.method == "transfer":
         if not args.quiet:
             sc = res["region_scales"]
@@ -313,8 +326,8 @@ def fap(args) -> int:
         from ..addon.retarget.fap import run_fap
 
     res = run_fap(args.take, args.head, args.output, head_object=args.object, head_pose_report=args.head_pose,
-                  marker_map=args.marker_map, neutral_frame=args.neutral_frame, drop_unseen=args.drop_unseen,
-                  conjecture_unseen=args.conjecture_unseen, high_level=not args.no_high_level, report=args.report)
+                  marker_map=args.marker_map, neutral_frame=args.neutral_frame, unseen=args.unseen,
+                  high_level=not args.no_high_level, report=args.report)
     if not args.quiet:
         print(f"{len(res['faps_written'])} FAPs over {res['frames']} frames -> {res['output']} "
               f"(FAPU mm: {', '.join(f'{k} {v:.1f}' for k, v in res['fapu_mm'].items())}; "
@@ -325,8 +338,9 @@ def fap(args) -> int:
 def batch(args) -> int:
     options = {"object": args.object, "mode": args.mode, "modes": args.modes, "neutral_frame": args.neutral_frame,
                "head_motion": args.head_motion, "no_blinks": args.no_blinks, "blink_seed": args.blink_seed,
-               "blink_interval": args.blink_interval, "k": args.k, "drop_unseen": args.drop_unseen,
-               "conjecture_unseen": args.conjecture_unseen, "marker_map": args.marker_map}
+               "blink_interval": args.blink_interval, "k": args.k, "unseen": args.unseen,
+               "marker_map": args.marker_map,
+               "frames": _take_frames(args), "frame_start": args.frame_start}
     from .batch import run_batch
 
     summary = run_batch(args.takes, args.head, args.out, workers=args.workers, options=options, quiet=args.quiet)

@@ -14,7 +14,7 @@ Commands (each documented in the README):
     mirror planes (in mm) from a ChArUco board seen directly and in both mirrors.
 ``mirrorcap colors learn VIDEO --classes K [--light uv|normal] -o COLORS.json``
     colour classes learned from sample frames.
-``mirrorcap bake TAKE.c3d --head HEAD.blend -o OUT.blend [--mode frames|pca] [--modes K] ...``
+``mirrorcap bake TAKE.c3d --head HEAD.blend -o OUT.blend [--mode frames|pca] [--modes K] [--frames S:E] ...``
     bind the take to the head, run the face rig on every frame, write the head with shape keys.
 ``mirrorcap retarget TAKE.c3d --head HEAD.blend --target TARGET.blend -o OUT.blend [--method arkit|transfer] [--csv LIVELINK.csv]``
     ARKit-52 weights of the take keyed on another character's shape keys.
@@ -74,13 +74,18 @@ def _washed_out_option(parser) -> None:
 
 
 def _unseen_options(parser) -> None:
+    """What happens to markers not seen in the neutral frame (a tracker's markers first seen later): one ``unseen``
+    (:func:`core.face.bind.bind_take`), placed from their neighbours unless said otherwise, as in the add-on."""
     unseen = parser.add_mutually_exclusive_group()
-    unseen.add_argument("--drop-unseen", action="store_true",
-                        help="leave out markers not seen in the neutral frame (default: refuse the take)")
-    unseen.add_argument("--conjecture-unseen", action="store_true",
+    unseen.add_argument("--conjecture-unseen", dest="unseen", action="store_const", const="conjecture",
                         help="place markers not seen in the neutral frame (a tracker's markers first seen later) "
                              "from their neighbours' learned relations; those expected off by more than 2 mm "
-                             "(3 sigma) are left out")
+                             "(3 sigma) are left out (the default)")
+    unseen.add_argument("--drop-unseen", dest="unseen", action="store_const", const="drop",
+                        help="leave out markers not seen in the neutral frame")
+    unseen.add_argument("--refuse-unseen", dest="unseen", action="store_const", const="error",
+                        help="refuse a take with markers not seen in the neutral frame")
+    parser.set_defaults(unseen="conjecture")
 
 
 def _binding_options(parser) -> None:
@@ -91,6 +96,28 @@ def _binding_options(parser) -> None:
     _unseen_options(parser)
 
 
+def _scene_frame(text: str) -> int:
+    """``--frame-start``: a Blender frame number (0 or more)."""
+    try:
+        frame = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a frame number: {text!r}") from None
+    if frame < 0:
+        raise argparse.ArgumentTypeError(f"a Blender scene starts at frame 0 or later, not {frame}")
+    return frame
+
+
+def _keying_options(parser, take_range: bool = False) -> None:
+    """Which take frames are keyed, and at which scene frames (``bake``, ``batch``, ``retarget``)."""
+    parser.add_argument("--frame-start", type=_scene_frame, default=1,
+                        help="scene frame of the first keyed frame; the scene's frame range is set to the keys "
+                             "(default 1; e.g. 1001 for a pipeline's shots)")
+    if take_range:
+        parser.add_argument("--frames", metavar="START:END",
+                            help="the take frames to bake, 0-based, END exclusive (default: all); the whole take is "
+                                 "bound, and its frames come out as in a bake of the whole take, blinks included")
+
+
 def _bake_options(parser) -> None:
     parser.add_argument("--object", help="the head object's name (default: the only head in the file)")
     parser.add_argument("--mode", choices=("frames", "pca"), default="frames",
@@ -98,6 +125,7 @@ def _bake_options(parser) -> None:
     parser.add_argument("--modes", type=int, default=8, help="number of PCA modes (default 8)")
     parser.add_argument("--neutral-frame", type=int, default=0, help="take frame of the neutral face (default 0)")
     parser.add_argument("--head-motion", action="store_true", help="key the head motion as the object's transform")
+    _keying_options(parser, take_range=True)
     _unseen_options(parser)
     parser.add_argument("--no-blinks", action="store_true", help="no synthetic eyelid blinks")
     parser.add_argument("--blink-seed", type=int, default=0, help="seed of the blink process (default 0)")
@@ -316,6 +344,7 @@ def _blender_commands(sub) -> None:
                      help="transfer: one shape key per frame (default) or PCA keys, as bake writes them")
     ret.add_argument("--modes", type=int, default=8, help="transfer --mode pca: number of keys (default 8)")
     ret.add_argument("--csv", help="LIVELINK.csv to write (Live Link Face format)")
+    _keying_options(ret)
     _binding_options(ret)
     ret.add_argument("--smoothness", type=float, help="temporal smoothness lambda in mm^2 (default 8)")
     ret.add_argument("--report", help="RETARGET.json to write")

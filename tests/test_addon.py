@@ -171,8 +171,11 @@ def test_animation_operators(operators_run):
     assert out["bind"] == ["FINISHED"] and out["bound_group"]
     assert out["binding"]["registration"] == "surface" and out["binding"]["rms_mm"] < 1.0
     assert out["bake"] == ["FINISHED"] and out["baked_keys"] == 15
+    # a stretch of the take in a scene starting at 1001: keyed from 1001 on, as the take's import is
+    assert out["bake_stretch"] == ["FINISHED"] and out["stretch_keys"] == 7
+    assert out["stretch_scene_frames"] == [1001, 1007] and out["stretch_first_key"] == [0.0, 1.0, 0.0]
     assert out["import_take"] == ["FINISHED"]
-    assert out["scene_frames"] == [1, 15]
+    assert out["scene_frames"] == [1001, 1015] and out["take_key_frames"] == [1001, 1002]
 
 
 def test_detect_markers_says_when_the_mirrors_dots_are_too_small():

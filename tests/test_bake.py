@@ -31,7 +31,7 @@ def _run(args, **kw):
 
 
 def _readback(blend, tmp_path, obj="GenericHead"):
-    out = tmp_path / "readback.npz"
+    out = tmp_path / f"{os.path.basename(blend)}.readback.npz"       # np.load reads lazily: one file per blend
     res = _run([READBACK, blend, obj, out])
     assert res.returncode == 0, res.stdout + res.stderr
     return np.load(out)
@@ -210,7 +210,7 @@ def test_bake_bad_input_fails_with_one_message_and_writes_nothing(tmp_path, head
     cases = [
         ([good, "--head", plain], "no mesh with region_"),
         ([anon, "--head", HEAD_BLEND], "too few to register"),
-        ([holey, "--head", HEAD_BLEND], "marker count changes"),
+        ([holey, "--head", HEAD_BLEND, "--refuse-unseen"], "marker count changes"),
         ([tmp_path / "junk.c3d", "--head", HEAD_BLEND], "not a C3D file"),
         ([good, "--head", tmp_path / "nope.blend"], "does not exist"),
         ([good, "--head", HEAD_BLEND, "--mode", "pca", "--modes", "50"], "--modes must be between 1"),
@@ -226,9 +226,66 @@ def test_bake_bad_input_fails_with_one_message_and_writes_nothing(tmp_path, head
         assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]
 
 
-def test_bake_places_markers_first_seen_later_with_conjecture_unseen(tmp_path, head_and_keys):
-    """`--conjecture-unseen`: a tracker's markers first seen after the neutral frame are bound
-    from a conjectured neutral position (BAKE.json lists them) instead of refusing the take."""
+def test_a_stretch_of_a_take_baked_at_a_pipelines_start_frame(tmp_path, head_and_keys):
+    """`--frames 22:50 --frame-start 1001`: the stretch is keyed at scene frames 1001..1028 (the scene's range
+    set to them), and what a user sees there -- the evaluated mesh in world space, head motion and blinks
+    included -- is what a bake of the whole take shows at its frames 23..50. The neutral frame (0) lies outside
+    the stretch. Bad ranges and start frames are refused before any work, and nothing is written."""
+    import json
+
+    head, keys = head_and_keys
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=140, n_frames=60, seed=11)
+    take = tmp_path / "take.c3d"
+    write_c3d(take, labels, pts, 24.0)
+    common = ["--head-motion", "--blink-interval", "0.4"]        # a blink or more inside the stretch
+    whole = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "whole.blend", *common])
+    assert whole.returncode == 0, whole.stdout + whole.stderr
+    part = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "part.blend", *common,
+                 "--frames", "22:50", "--frame-start", "1001", "--report", tmp_path / "bake.json"])
+    assert part.returncode == 0, part.stdout + part.stderr
+    assert "baked 28 frames (22:50)" in part.stdout and "scene frames 1001-1028" in part.stdout
+    report = json.loads((tmp_path / "bake.json").read_text())
+    assert report["take_frames"] == [22, 50] and report["frame_start"] == 1001 and report["blink_frames"] > 0
+    rb_whole, rb_part = _readback(tmp_path / "whole.blend", tmp_path), _readback(tmp_path / "part.blend", tmp_path)
+    assert list(rb_part["frames"]) == list(range(1001, 1029)) and list(rb_whole["frames"]) == list(range(1, 61))
+    assert np.array_equal(rb_part["values"], np.eye(28))          # frame_00001 is 1 at 1001 only, and so on
+    seen_whole, seen_part = rb_whole["world"][22:50], rb_part["world"]
+    assert np.linalg.norm(seen_whole - seen_whole[:1], axis=2).max() > 2e-3     # the stretch moves
+    assert np.abs(seen_part - seen_whole).max() < 1e-6            # 1 micrometre, at every keyed frame
+    for bad, message in ((["--frames", "50:70"], "is not a stretch of the take's 60 frames"),
+                         (["--frames", "30:20"], "is empty"),
+                         (["--frame-start", "-5"], "starts at frame 0 or later"),
+                         (["--frame-start", "1048570"], "must lie within Blender's frames")):
+        res = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "bad.blend", *bad])
+        assert res.returncode == 2 and message in res.stderr, (bad, res.stdout + res.stderr)
+    assert not (tmp_path / "bad.blend").exists()
+
+
+def test_a_long_frames_mode_bake_warns_of_its_size(tmp_path, head_and_keys):
+    """A frames-mode bake of more than FRAMES_MODE_WARNING frames (5,000; 10 here) says what its one shape key a
+    frame will cost, and the ways out; a PCA bake of as many frames does not."""
+    head, keys = head_and_keys
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=120, n_frames=12, seed=2)
+    write_c3d(tmp_path / "take.c3d", labels, pts, 24.0)
+    code = ("import json, sys\n"
+            "from mirrorcap.addon.bake import bake\n"
+            "bake.FRAMES_MODE_WARNING = 10\n"
+            "for mode in ('frames', 'pca'):\n"
+            f"    r = bake.run_bake({str(tmp_path / 'take.c3d')!r}, {str(HEAD_BLEND)!r}, {str(tmp_path / 'o.blend')!r}, "
+            "mode=mode, n_modes=4)\n"
+            "    print('RESULT', json.dumps(r['warnings']))\n")
+    res = _run(["-c", code])
+    assert res.returncode == 0, res.stdout + res.stderr
+    frames, pca = [__import__("json").loads(ln.split("RESULT ", 1)[1]) for ln in res.stdout.splitlines()
+                   if ln.startswith("RESULT ")]
+    assert pca == [] and len(frames) == 1
+    assert frames[0].startswith("12 frames as one shape key each: about 1 MB") and "--mode pca" in frames[0]
+
+
+def test_bake_places_markers_first_seen_later_by_default(tmp_path, head_and_keys):
+    """A tracker's markers first seen after the neutral frame are bound from a conjectured neutral position
+    (BAKE.json lists them), by default as in the add-on (before: the command refused such a take unless given
+    `--conjecture-unseen`, which still says the same); `--refuse-unseen` refuses it and names the ways out."""
     import json
 
     head, keys = head_and_keys
@@ -237,18 +294,24 @@ def test_bake_places_markers_first_seen_later_with_conjecture_unseen(tmp_path, h
     pts[:5, late] = np.nan
     take = tmp_path / "take.c3d"
     write_c3d(take, labels, pts, 24.0)
-    refused = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "no.blend"])
+    refused = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "no.blend",
+                    "--refuse-unseen"])
     assert refused.returncode == 2 and "marker count changes" in refused.stderr
     assert "--conjecture-unseen" in refused.stderr and "--drop-unseen" in refused.stderr   # the two ways out named
     both = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "no.blend",
                  "--drop-unseen", "--conjecture-unseen"])
     assert both.returncode == 2 and "not allowed with" in both.stderr
-    res = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "out.blend",
-                "--conjecture-unseen", "--report", tmp_path / "bake.json"])
-    assert res.returncode == 0, res.stdout + res.stderr
-    report = json.loads((tmp_path / "bake.json").read_text())
+    reports = []
+    for flag in ([], ["--conjecture-unseen"]):
+        res = _run(["-m", "mirrorcap", "bake", take, "--head", HEAD_BLEND, "-o", tmp_path / "out.blend", *flag,
+                    "--report", tmp_path / "bake.json"])
+        assert res.returncode == 0, res.stdout + res.stderr
+        reports.append(json.loads((tmp_path / "bake.json").read_text()))
+    report = reports[0]
     assert sorted(report["markers_neutral_conjectured"]) == sorted(labels[i] for i in late)
     assert report["markers"] == 120 and report["markers_dropped_unseen"] == []
+    assert reports[1]["markers_neutral_conjectured"] == report["markers_neutral_conjectured"]
+    assert reports[1]["binding_distance_mm"] == report["binding_distance_mm"]
     assert not (tmp_path / "no.blend").exists()
 
 

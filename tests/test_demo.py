@@ -78,7 +78,7 @@ def test_batch_bakes_takes_in_parallel_and_reports_a_failing_one(demo, tmp_path)
     bad = tmp_path / "broken.c3d"
     bad.write_bytes(b"not a take" * 50)
     res = _run(["-m", "mirrorcap", "batch", *good, bad, "--head", out / "fitted_head.blend", "--out",
-                tmp_path / "baked", "--workers", "2", "--drop-unseen"])
+                tmp_path / "baked", "--workers", "2", "--drop-unseen", "--frames", "20:", "--frame-start", "1001"])
     assert res.returncode == 1, res.stdout + res.stderr
     lines = [ln for ln in res.stdout.splitlines() if "] " in ln and ("ok " in ln or "FAIL" in ln)]
     assert len(lines) == 3 and sum("FAIL" in ln for ln in lines) == 1
@@ -89,7 +89,8 @@ def test_batch_bakes_takes_in_parallel_and_reports_a_failing_one(demo, tmp_path)
     assert len({r["pid"] for r in summary["results"] if r["ok"]}) >= 1
     for g in good:
         assert (tmp_path / "baked" / f"{g.stem}.blend").stat().st_size > 100_000
-        assert json.loads((tmp_path / "baked" / f"{g.stem}.bake.json").read_text())["frames"] == 120
+        report = json.loads((tmp_path / "baked" / f"{g.stem}.bake.json").read_text())
+        assert report["frames"] == 100 and report["take_frames"] == [20, 120] and report["frame_start"] == 1001
     assert not (tmp_path / "baked" / "broken.blend").exists()
     # Blender's own messages go to the take's log, not into the batch's output
     assert "Read blend" not in res.stdout + res.stderr
@@ -204,7 +205,7 @@ def test_batch_goes_on_when_a_take_kills_its_worker(demo, tmp_path):
     for t in takes:
         t.write_bytes((out / "take.c3d").read_bytes())
     options = {"object": None, "mode": "frames", "modes": 8, "neutral_frame": 0, "head_motion": False,
-               "no_blinks": False, "blink_seed": 0, "blink_interval": 2.5, "k": 16.0, "drop_unseen": True}
+               "no_blinks": False, "blink_seed": 0, "blink_interval": 2.5, "k": 16.0, "unseen": "drop"}
     summary = run_batch(takes, out / "fitted_head.blend", tmp_path / "baked", workers=2, options=options, quiet=True,
                         bake=bake_or_crash)
     res = {r["take"]: r for r in summary["results"]}

@@ -11,6 +11,7 @@ import pytest
 
 from conftest import ROOT
 
+from mirrorcap.core.face.animate import animate_take
 from mirrorcap.core.face.bind import bind_take, fill_gaps
 from mirrorcap.core.geometry.rigid import similarity_fit
 from mirrorcap.core.take.c3d import c3d_bytes, read_c3d
@@ -445,6 +446,28 @@ def test_pca_reproduces_a_performance_of_eight_expressions_with_eight_modes(head
     table = pca_error_table(rich, ks=(1, 2, 3, 8, 23, len(EXPRESSIONS) + len(SINGLE_UNITS)))
     rms = [r["rms_mm"] for r in table]
     assert all(a >= b for a, b in zip(rms, rms[1:])) and table[-1]["max_mm"] < 1e-6
+
+
+def test_pca_of_a_long_take_from_some_of_its_frames_a_block_at_a_time(head_and_keys):
+    """A take longer than the basis (``basis_frames``; 2,000 frames by default) is decomposed on that many of its
+    frames and every frame projected a block at a time: a performance of eight expressions still comes back
+    exactly with eight modes, and a rig's output (blinks, jaw) served as an Animation -- its frames deformed a
+    block at a time, never all at once -- gives what the whole array gives."""
+    head, keys = head_and_keys
+    D, _ = performance(head, keys, 300, seed=1)
+    pca = pca_shapes(D, 8, basis_frames=40)
+    assert pca.max_error_mm < 1e-6 and np.abs(np.einsum("fk,kvd->fvd", pca.weights, pca.modes) - D).max() < 1e-6
+    assert np.abs(pca.weights).max() == pytest.approx(1.0)
+    labels, pts, *_ = synthetic_take(head, keys, n_markers=120, n_frames=90, seed=4)
+    anim = animate_take(head, labels, pts, 30.0, settings=RigSettings(blink_interval_s=0.5), frames=(10, 90))
+    whole = anim.rig.deform(anim.binding.displacements, 30.0)[10:90]            # the whole take, then the stretch
+    assert (anim.parts["blink"] > 0.5).any()
+    served = pca_shapes(anim, 6, basis_frames=30)
+    assert "displacements" not in anim.__dict__                                # never all at once
+    held = pca_shapes(whole, 6, basis_frames=30)
+    assert np.abs(served.weights - held.weights).max() < 1e-9 and np.abs(served.modes - held.modes).max() < 1e-9
+    assert served.max_error_mm == pytest.approx(held.max_error_mm, abs=1e-9)
+    assert np.abs(anim.displacements - whole).max() < 1e-9
 
 
 # -- fitting to a scan ---------------------------------------------------------------------

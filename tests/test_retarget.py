@@ -233,6 +233,26 @@ def test_retarget_keys_a_character_whose_shape_names_another_tool_spelled(tmp_pa
     assert len(cols) == 52 and np.abs(rb["values"] - W[:, cols]).max() < 1e-4      # each key carries its shape
 
 
+def test_retarget_keys_from_a_pipelines_start_frame(tmp_path, head_and_keys):
+    """`--frame-start 1001`: a take's first row is keyed at scene frame 1001 and its last at 1000 + rows, the
+    scene's range set to them (before: always 1..rows)."""
+    head, keys = head_and_keys
+    _character(head, keys, tmp_path)
+    W = np.clip(np.random.default_rng(5).normal(0.3, 0.2, (15, len(ARKIT_SHAPES))), 0.0, 1.0)
+    (tmp_path / "take.csv").write_text(livelink_csv(W, ARKIT_SHAPES, 30.0))
+    out = tmp_path / "out.blend"
+    res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.csv", "--target", tmp_path / "target.blend", "-o", out,
+                "--frame-start", "1001", "--report", tmp_path / "r.json"])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert json.loads((tmp_path / "r.json").read_text())["frame_start"] == 1001
+    r = _run([ROOT / "tests" / "blender" / "readback.py", out, "Character", tmp_path / "rb.npz"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    rb = np.load(tmp_path / "rb.npz")
+    assert list(rb["frames"]) == list(range(1001, 1016))
+    cols = [ARKIT_SHAPES.index(name) for name in rb["names"]]
+    assert len(cols) == 52 and np.abs(rb["values"] - W[:, cols]).max() < 1e-4    # row f at frame 1001 + f
+
+
 def test_timecodes_tell_a_csv_takes_rate():
     """The rows per second of the clock, over the seconds a take spans whole; None where they cannot tell."""
     for rate in (24.0, 30.0, 60.0):
@@ -281,11 +301,11 @@ def test_retarget_bad_input_writes_nothing(tmp_path, head_and_keys):
         assert res.returncode == 2 and words in res.stderr, (extra, res.stderr)
         assert not out.exists() and not (tmp_path / "x.csv").exists()
     res = _run(["-m", "mirrorcap", "retarget", tmp_path / "holey.c3d", "--head", HEAD_BLEND, "--target", HEAD_BLEND,
-                "-o", out])
+                "-o", out, "--refuse-unseen"])
     assert res.returncode == 2 and "neutral frame" in res.stderr and not out.exists()
-    # as for bake, a tracker's late markers are dropped or placed from their neighbours on request
+    # as for bake, a tracker's late markers are placed from their neighbours unless said otherwise
     res = _run(["-m", "mirrorcap", "retarget", tmp_path / "holey.c3d", "--head", HEAD_BLEND, "--target", HEAD_BLEND,
-                "-o", out, "--conjecture-unseen"])
+                "-o", out])
     assert res.returncode == 0 and out.exists(), res.stdout + res.stderr
 
 

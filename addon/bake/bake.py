@@ -14,7 +14,7 @@ from pathlib import Path
 import bpy
 
 from ...core.common.errors import InputError
-from ...core.face.animate import animate_take, head_pose_from_report, unseen_policy
+from ...core.face.animate import animate_take, head_pose_from_report, take_frame_range
 from ...core.face.bind import load_marker_map
 from ...core.face.facerig import RigSettings
 from ...core.retarget.mpeg4 import read_fap, replay_take
@@ -22,6 +22,13 @@ from ...core.take.c3d import read_c3d
 from ..common.keys import set_scene_rate
 from ..common.shape_keys import MODES, bake_displacements
 from ..common.headio import find_head_object, head_feature_points, open_blend, read_head, save_blend_atomically
+
+#: a frames-mode bake of more frames than this is warned about (one shape key a frame)
+FRAMES_MODE_WARNING = 5000
+#: .blend megabytes a frame key takes (measured: 153 MB for 3,600 frames of the 4,608-vertex generic head),
+#: per 1,000 vertices
+FRAME_KEY_MB_PER_KVERT = 0.0092
+
 
 def fap_as_take(track, obj, head):
     """A .fap track (:func:`core.retarget.mpeg4.read_fap`) as the take ``bake`` animates on the
@@ -33,13 +40,16 @@ def fap_as_take(track, obj, head):
 
 def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n_modes: int = 8,
              neutral_frame: int = 0, head_pose_report=None, head_motion: bool = False,
-             settings: RigSettings | None = None, report=None, progress=None, drop_unseen: bool = False,
-             conjecture_unseen: bool = False, marker_map=None, fap=None) -> dict:
+             settings: RigSettings | None = None, report=None, progress=None, unseen: str = "conjecture",
+             marker_map=None, fap=None, frames=None, frame_start: int = 1) -> dict:
     """The whole ``mirrorcap bake``: read, bind, rig, bake, save atomically. Returns the report.
-    Markers not seen in the neutral frame: refused, left out (``drop_unseen``) or placed from
-    their neighbours (``conjecture_unseen``, :func:`core.face.bind.bind_take`). ``marker_map``:
+    Markers not seen in the neutral frame (``unseen``): placed from their neighbours (``"conjecture"``, a
+    tracker's markers first seen later), left out (``"drop"``) or refused (``"error"``;
+    :func:`core.face.bind.bind_take`). ``marker_map``:
     a MAP.json path (:func:`core.face.bind.load_marker_map`). ``fap``: a .fap file to play on the
-    head instead of a take (:func:`core.retarget.mpeg4.replay_take`; ``take`` is then None)."""
+    head instead of a take (:func:`core.retarget.mpeg4.replay_take`; ``take`` is then None).
+    ``frames``: the take frames ``(START, END)`` to bake (END exclusive, None: to the end; the whole
+    take is bound), keyed from the scene frame ``frame_start`` on."""
     if mode not in MODES:
         raise InputError(f"--mode must be one of {', '.join(MODES)}")
     if (take is None) == (fap is None):
@@ -56,8 +66,9 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
         mapping = load_marker_map(marker_map) if marker_map else None
         F = data["points"].shape[0]
         pose = None if head_pose_report is None else head_pose_from_report(head_pose_report, F)
-    if mode == "pca" and not 1 <= n_modes <= F:
-        raise InputError(f"--modes must be between 1 and the take's {F} frames")
+    start, end = take_frame_range(frames, F)
+    if mode == "pca" and not 1 <= n_modes <= end - start:
+        raise InputError(f"--modes must be between 1 and the {end - start} frames baked")
     open_blend(head_blend)
     obj = find_head_object(object_name)
     head = read_head(obj)
@@ -67,15 +78,20 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
     timings["read_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     anim = animate_take(head, data["labels"], data["points"], data["rate"], neutral_frame=neutral_frame,
-                        head_pose=pose, unseen=unseen_policy(drop_unseen, conjecture_unseen), settings=settings,
-                        marker_map=mapping)
-    binding, D = anim.binding, anim.displacements
-    timings["rig_s"] = time.perf_counter() - t1
+                        head_pose=pose, unseen=unseen, settings=settings,
+                        marker_map=mapping, frames=(start, end))
+    timings["bind_s"] = time.perf_counter() - t1          # binding and the face rig's set-up
     t2 = time.perf_counter()
-    out = bake_displacements(obj, head.vertices, D, mode, n_modes, head_motion=binding.head_motion if head_motion else None,
-                             progress=progress)
+    out = bake_displacements(obj, head.vertices, anim, mode, n_modes, frame_start=frame_start,
+                             head_motion=anim.head_motion if head_motion else None, progress=progress)
     set_scene_rate(bpy.context.scene, data["rate"])
-    timings["bake_s"] = time.perf_counter() - t2
+    warnings = []
+    if mode == "frames" and anim.n_frames > FRAMES_MODE_WARNING:
+        warnings.append(f"{anim.n_frames} frames as one shape key each: about "
+                        f"{anim.n_frames * FRAME_KEY_MB_PER_KVERT * len(head.vertices) / 1000:.0f} MB "
+                        "of .blend and as much memory in Blender; --mode pca keys a few shapes instead, or bake the "
+                        "take in stretches (--frames START:END)")
+    timings["rig_and_keys_s"] = time.perf_counter() - t2  # the rig's deformation, a block of frames at a time, keyed
     t3 = time.perf_counter()
     save_blend_atomically(output)
     timings["save_s"] = time.perf_counter() - t3
@@ -83,7 +99,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
     result = {
         "take": str(take if fap is None else fap), "head": str(head_blend), "object": obj.name, "output": str(output), **out,
         "rate": data["rate"], "markers": len(data["labels"]), **anim.summary(),
-        "timings_s": timings,
+        "warnings": warnings, "timings_s": timings,
     }
     if report is not None:
         from ...core.common.files import write_files_atomically

@@ -161,6 +161,10 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
     blink_seed: IntProperty(name="Blink Seed", default=0)
     fap: StringProperty(name="FAP File", subtype="FILE_PATH",
                         description="an MPEG-4 .fap file to play on the head instead of the take")
+    take_start: IntProperty(name="From Take Frame", default=0, min=0,
+                            description="first take frame to bake (0-based; the whole take is bound)")
+    take_end: IntProperty(name="To Take Frame", default=0, min=0,
+                          description="take frame to stop before (0: the take's end)")
 
     def prepare(self, context):
         from ...core.take.c3d import read_c3d
@@ -180,8 +184,11 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
             data = read_c3d(required(input_path(self.take, scene_settings(context).take, what="take"),
                                      "take (TAKE.c3d)"))
             mapping = scene_marker_map(context)
-        if self.mode == "pca" and self.modes > data["points"].shape[0]:
-            raise InputError(f"Modes must be at most the take's {data['points'].shape[0]} frames")
+        from ...core.face.animate import take_frame_range
+
+        frames = take_frame_range((self.take_start, self.take_end or None), data["points"].shape[0])
+        if self.mode == "pca" and self.modes > frames[1] - frames[0]:
+            raise InputError(f"Modes must be at most the {frames[1] - frames[0]} frames baked")
         self._obj_name = obj.name
 
         def work(progress):
@@ -191,20 +198,21 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
             anim = animate_take(head, data["labels"], data["points"], data["rate"], neutral_frame=self.neutral_frame,
                                 head_pose=pose, unseen=self.unseen(), settings=RigSettings(blinks=self.blinks, blink_seed=self.blink_seed,
                                                                            blink_interval_s=None),
-                                progress=progress, marker_map=mapping)
-            return head, anim.binding, anim.displacements, anim.rate
+                                progress=progress, marker_map=mapping, frames=frames)
+            anim.displacements                  # the face rig's work, here where it can be cancelled
+            return head, anim
 
         return work
 
     def finish(self, context, result):
         from ..common.shape_keys import bake_displacements
 
-        head, binding, D, rate = result
+        head, anim = result
         obj = bpy.data.objects[self._obj_name]
-        out = bake_displacements(obj, head.vertices, D, self.mode, self.modes,
-                                 head_motion=binding.head_motion if self.head_motion else None)
-        set_scene_rate(context.scene, rate)
-        context.scene.frame_start, context.scene.frame_end = 1, out["frames"]
+        out = bake_displacements(obj, head.vertices, anim.displacements, self.mode, self.modes,
+                                 frame_start=context.scene.frame_start,
+                                 head_motion=anim.head_motion if self.head_motion else None)
+        set_scene_rate(context.scene, anim.rate)
         extra = f", PCA max error {out['pca_max_error_mm']:.3f} mm" if self.mode == "pca" else ""
         return f"baked {out['frames']} frames onto {obj.name}{extra}"
 

@@ -20,8 +20,13 @@ class MIRRORCAP_PT_bake(SidebarPanel, bpy.types.Panel):
             col.prop(s, "modes")
         col.prop(s, "head_motion")
         col.prop(s, "blinks")
+        row = col.row(align=True)
+        row.prop(s, "bake_take_start")
+        row.prop(s, "bake_take_end")
         op = col.operator("mirrorcap.bake", icon="SHAPEKEY_DATA")
         op.mode, op.modes, op.head_motion, op.blinks = s.bake_mode, s.modes, s.head_motion, s.blinks
+        op.take_start, op.take_end = s.bake_take_start, s.bake_take_end
+        col.label(text=f"keys from the scene's start frame, {context.scene.frame_start}")
         box = col.box()
         box.label(text="Marker map (sparse takes: pick a marker empty, then)")
         box.prop(s, "marker_map")
@@ -32,7 +37,6 @@ class MIRRORCAP_PT_bake(SidebarPanel, bpy.types.Panel):
         row.operator("mirrorcap.map_marker", text="Rigid").role = "RIGID"
         row.operator("mirrorcap.map_marker", text="Ignore").role = "IGNORE"
         row.operator("mirrorcap.map_marker", text="Remove").role = "REMOVE"
-        col.label(text="Retargeting: coming next", icon="INFO")
 
 
 PANELS = (MIRRORCAP_PT_bake,)

@@ -1,10 +1,13 @@
 """Keying shape-key values: one F-curve per key, filled with one ``keyframe_points.foreach_set``
-(the bake's frame and PCA keys, the retarget's ARKit weights); and the scene's frame rate."""
+(the bake's frame and PCA keys, the retarget's ARKit weights); the scene frames they are keyed at; and the
+scene's frame rate."""
 
 from __future__ import annotations
 
 import bpy
 import numpy as np
+
+from ...core.common.errors import InputError
 
 
 def key_fcurves(key, action, names, frames, values, interpolation: str):
@@ -31,3 +34,17 @@ def set_scene_rate(scene, rate: float) -> None:
     fps = max(1, int(np.ceil(rate - 1e-6)))
     scene.render.fps = fps
     scene.render.fps_base = fps / rate
+
+
+def keyed_frames(scene, frame_start: int, n_frames: int) -> np.ndarray:
+    """The scene frames ``frame_start`` .. ``frame_start + n_frames - 1`` that ``n_frames`` take frames are keyed at
+    (``--frame-start``: a pipeline's shots may start at 1001), checked against the frames a Blender scene can hold;
+    the scene's frame range is set to them."""
+    props = bpy.types.Scene.bl_rna.properties
+    lowest, highest = props["frame_start"].hard_min, props["frame_end"].hard_max
+    frame_start = int(frame_start)
+    if not lowest <= frame_start <= highest - n_frames + 1:
+        raise InputError(f"--frame-start {frame_start}: {n_frames} frames keyed from there must lie within Blender's "
+                         f"frames {lowest}..{highest}")
+    scene.frame_start, scene.frame_end = frame_start, frame_start + n_frames - 1
+    return frame_start + np.arange(n_frames)

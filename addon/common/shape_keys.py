@@ -18,9 +18,9 @@ import bpy
 import numpy as np
 
 from ...core.common.errors import InputError
-from ...core.face.shapes import pca_shapes
+from ...core.face.shapes import displacement_source, pca_shapes
 from .frames import core_rotation_to_blender, core_to_blender, object_axes
-from .keys import key_fcurves
+from .keys import key_fcurves, keyed_frames
 
 MODES = ("frames", "pca")
 
@@ -35,14 +35,18 @@ def _clear_mirrorcap_keys(obj):
 
 def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_modes: int = 8,
                        frame_start: int = 1, head_motion=None, progress=None) -> dict:
-    """Write ``displacements (F, V, 3)`` (core mm, head frame) onto ``obj`` as shape keys."""
+    """Write ``displacements (F, V, 3)`` (core mm, head frame: an array, or an :class:`core.face.animate.Animation`
+    whose frames are deformed a block at a time as they are written, so that a long take never has them all in
+    memory) onto ``obj`` as shape keys, keyed from the scene frame ``frame_start`` on (the scene's frame range is
+    set to the keyed frames)."""
     if mode not in MODES:
         raise InputError(f"--mode must be one of {', '.join(MODES)}")
-    D = np.asarray(displacements, float)
-    F, V = D.shape[:2]
+    src = displacement_source(displacements)
+    F, V = src.n_frames, len(neutral_mm)
     if V != len(obj.data.vertices):
         raise InputError(f"{V} displacements for a head of {len(obj.data.vertices)} vertices")
     axes = object_axes(obj)
+    frames = keyed_frames(bpy.context.scene, frame_start, F)
     _clear_mirrorcap_keys(obj)
     if obj.data.shape_keys is None:
         obj.shape_key_add(name="Basis", from_mix=False)
@@ -52,21 +56,21 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
         key.animation_data_create()
     action = bpy.data.actions.new(f"{obj.name}_mirrorcap")
     key.animation_data.action = action
-    frames = frame_start + np.arange(F)
     out = {"mode": mode, "frames": int(F), "vertices": int(V)}
     if mode == "frames":
         names = [f"frame_{i + 1:05d}" for i in range(F)]
-        for i, name in enumerate(names):
-            kb = obj.shape_key_add(name=name, from_mix=False)
-            kb.value = 0.0  # its F-curve sets it to 1 on its own frame only
-            kb.points.foreach_set("co", core_to_blender(neutral_mm + D[i], axes).astype(np.float32).ravel())
-            if progress and i % 100 == 0:
-                progress(i / F)
+        for f0, block in src.blocks():
+            for i, disp in enumerate(block, f0):
+                kb = obj.shape_key_add(name=names[i], from_mix=False)
+                kb.value = 0.0  # its F-curve sets it to 1 on its own frame only
+                kb.points.foreach_set("co", core_to_blender(neutral_mm + disp, axes).astype(np.float32).ravel())
+            if progress:
+                progress((f0 + len(block)) / F)
         # each key: 0 the frame before, 1 on its frame, 0 the frame after (constant steps)
         kf = np.stack([frames - 1, frames, frames + 1], 1)
         key_fcurves(key, action, names, kf, np.tile([0.0, 1.0, 0.0], (F, 1)), "CONSTANT")
     else:
-        pca = pca_shapes(D, n_modes)
+        pca = pca_shapes(src, n_modes)
         names = [f"mode_{k + 1:02d}" for k in range(n_modes)]
         for k, name in enumerate(names):
             kb = obj.shape_key_add(name=name, from_mix=False)
@@ -88,8 +92,7 @@ def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_m
                 fc.keyframe_points.foreach_set("co", np.column_stack([frames, vals[:, axis]]).astype(np.float32).ravel())
                 fc.update()
         out["head_motion"] = True
-    scene = bpy.context.scene
-    scene.frame_start, scene.frame_end = int(frame_start), int(frame_start + F - 1)
+    out["frame_start"] = int(frames[0])
     return out
 
 

@@ -17,12 +17,13 @@ import numpy as np
 
 from ...core.take.c3d import read_c3d
 from .frames import core_to_blender
-from .keys import set_scene_rate
+from .keys import keyed_frames, set_scene_rate
 from .properties import preferences
 
 
 def import_take(context, path, name: str | None = None, data: dict | None = None):
-    """Add the take at ``path`` (or ``data`` as :func:`read_c3d` returns it); returns the parent empty."""
+    """Add the take at ``path`` (or ``data`` as :func:`read_c3d` returns it), keyed from the scene's start frame on
+    as a bake is (:func:`.keys.keyed_frames`); returns the parent empty."""
     data = read_c3d(path) if data is None else data
     P = data["points"]                          # (F, M, 3) core frame
     F, M, _ = P.shape
@@ -43,7 +44,7 @@ def import_take(context, path, name: str | None = None, data: dict | None = None
         B = 0.001 * np.nan_to_num(P)                            # the lab's own axes, metres
     parent["mirrorcap_frame"] = data["frame"]
     seen = np.all(np.isfinite(P), axis=2)
-    frames = np.arange(F, dtype=np.float32) + 1.0
+    frames = keyed_frames(context.scene, context.scene.frame_start, F).astype(np.float32)
     for m, label in enumerate(data["labels"]):
         ob = bpy.data.objects.new(f"{name}_{label}", None)
         ob.empty_display_type = "SPHERE"
@@ -63,6 +64,5 @@ def import_take(context, path, name: str | None = None, data: dict | None = None
             fc.keyframe_points.add(n)
             fc.keyframe_points.foreach_set("co", np.column_stack([frames[ok], B[ok, m, axis]]).astype(np.float32).ravel())
             fc.update()
-    context.scene.frame_start, context.scene.frame_end = 1, F
     set_scene_rate(context.scene, data["rate"])
     return parent

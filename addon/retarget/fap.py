@@ -21,14 +21,14 @@ import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.common.files import write_files_atomically
-from ...core.face.animate import head_pose_from_report, unseen_policy
+from ...core.face.animate import head_pose_from_report
 from ...core.face.bind import load_marker_map
 from ...core.retarget import mpeg4
 from ...core.take.c3d import read_c3d
 from ..common.headio import find_head_object, head_feature_points, open_blend, read_head
 
 def run_fap(take, head_blend, output, *, head_object=None, head_pose_report=None, marker_map=None,
-            neutral_frame: int = 0, drop_unseen: bool = False, conjecture_unseen: bool = False,
+            neutral_frame: int = 0, unseen: str = "conjecture",
             high_level: bool = True, report=None, name: str | None = None) -> dict:
     """The whole ``mirrorcap fap``: read, bind, rig, measure the FAPs, write TAKE.fap atomically.
     Returns the report (also written to ``report`` as JSON when given)."""
@@ -48,7 +48,7 @@ def run_fap(take, head_blend, output, *, head_object=None, head_pose_report=None
     units = mpeg4.fap_units(head, points)
     anim, track = mpeg4.take_faps(head, data["labels"], data["points"], data["rate"], feature=points,
                                   neutral_frame=neutral_frame, head_pose=pose,
-                                  unseen=unseen_policy(drop_unseen, conjecture_unseen), marker_map=mapping,
+                                  unseen=unseen, marker_map=mapping,
                                   high_level=high_level, name=name or Path(take).stem)
     write_files_atomically({output: mpeg4.fap_text(track)})
     written = [int(n) for n in np.flatnonzero(track.mask) + 1]

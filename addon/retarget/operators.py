@@ -109,7 +109,8 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
 
         character, tr = result
         target = bpy.data.objects[self._target]
-        out = bake_displacements(target, character.vertices, tr.displacements, self._mode, self._modes)
+        out = bake_displacements(target, character.vertices, tr.displacements, self._mode, self._modes,
+                                 frame_start=context.scene.frame_start)
         set_scene_rate(context.scene, self._rate)
         sc = tr.scales
         return (f"transferred {out['frames']} frames onto {target.name} ({self._mode} keys); scales upper "
@@ -125,9 +126,8 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         solve, angles = result
         target = bpy.data.objects[self._target]
         text = livelink_csv(solve.weights, solve.names, self._rate, head=angles) if self._csv else None
-        keyed = key_weights(target, solve.names, solve.weights)
+        keyed = key_weights(target, solve.names, solve.weights, context.scene.frame_start)
         F = solve.weights.shape[0]
-        context.scene.frame_start, context.scene.frame_end = 1, F
         set_scene_rate(context.scene, self._rate)
         if text is not None:
             write_files_atomically({self._csv: text})

@@ -22,7 +22,7 @@ import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.common.files import write_files_atomically
-from ...core.face.animate import head_pose_from_report, unseen_policy
+from ...core.face.animate import head_pose_from_report
 from ...core.face.bind import load_marker_map
 from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take, shape_name_key
 from ...core.retarget.livelink import livelink_csv, read_livelink_csv, timecode_rate
@@ -30,7 +30,7 @@ from ...core.retarget.transfer import TRANSFER_LANDMARKS, transfer_take
 from ...core.take.c3d import read_c3d
 from ..common.shape_keys import MODES, bake_displacements
 from ..common.headio import find_head_object, open_blend, read_head, read_shape_keys, save_blend_atomically
-from ..common.keys import key_fcurves, set_scene_rate
+from ..common.keys import key_fcurves, keyed_frames, set_scene_rate
 
 METHODS = ("arkit", "transfer")
 
@@ -74,11 +74,12 @@ def find_target_object(name: str | None):
 
 
 def key_weights(obj, solved_names, weights, frame_start: int = 1) -> dict:
-    """Key ``weights (F, K)`` on ``obj``'s shape keys named like ``solved_names``; returns
-    ``{"keyed": [...], "missing": [...]}``."""
+    """Key ``weights (F, K)`` on ``obj``'s shape keys named like ``solved_names`` from the scene frame ``frame_start``
+    on (:func:`..common.keys.keyed_frames`); returns ``{"keyed": [...], "missing": [...]}``."""
     key = obj.data.shape_keys
     if key is None:
         raise InputError(f"{obj.name} has no shape keys")
+    weights = np.asarray(weights)
     found, missing = match_shape_names([kb.name for kb in key.key_blocks if kb != key.reference_key], solved_names)
     if not found:
         raise InputError(f"{obj.name} has none of the ARKit shape keys (eyeBlinkLeft, jawOpen, ...)")
@@ -90,8 +91,8 @@ def key_weights(obj, solved_names, weights, frame_start: int = 1) -> dict:
     targets = [found[n] for n in found]
     for t in targets:
         key.key_blocks[t].value = 0.0
-    F = weights.shape[0]
-    key_fcurves(key, action, targets, frame_start + np.arange(F), np.asarray(weights)[:, cols].T, "LINEAR")
+    frames = keyed_frames(bpy.context.scene, frame_start, weights.shape[0])
+    key_fcurves(key, action, targets, frames, np.asarray(weights)[:, cols].T, "LINEAR")
     return {"keyed": targets, "missing": missing}
 
 
@@ -101,7 +102,8 @@ LIVELINK_DEFAULT_RATE = 60.0
 RATE_DISAGREEMENT = 0.02
 
 
-def run_livelink(csv_path, target_blend, output, target_object=None, rate: float | None = None, report=None) -> dict:
+def run_livelink(csv_path, target_blend, output, target_object=None, rate: float | None = None, report=None,
+                 frame_start: int = 1) -> dict:
     """Key a character from a Live Link Face CSV (an iPhone take, or one MirrorCap wrote): its
     52 weights on the target's shape keys of the same names, one CSV row per frame. The scene plays at ``rate``,
     else at the rate the rows' timecodes keep (:func:`core.retarget.livelink.timecode_rate`), else at
@@ -128,13 +130,12 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
                             "the timecodes)")
     open_blend(target_blend)
     target = find_target_object(target_object)
-    keyed = key_weights(target, table["names"], weights)
-    scene = bpy.context.scene
-    scene.frame_start, scene.frame_end = 1, len(weights)
-    set_scene_rate(scene, rate)
+    keyed = key_weights(target, table["names"], weights, frame_start)
+    set_scene_rate(bpy.context.scene, rate)
     save_blend_atomically(output)
     result = {"csv": str(csv_path), "target": str(target_blend), "target_object": target.name, "output": str(output),
-              "frames": len(weights), "rate": rate, "rate_source": source, "timecode_rate": kept,
+              "frames": len(weights), "frame_start": int(frame_start), "rate": rate, "rate_source": source,
+              "timecode_rate": kept,
               "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"],
               "missing_csv_columns": table["missing_columns"], "warnings": warnings}
     if report is not None:
@@ -161,10 +162,11 @@ def _take_and_actor(take, head_blend, head_object, head_pose_report, marker_map,
 
 def run_retarget(take, head_blend, target_blend, output, target_object=None, method: str = "arkit",
                  csv=None, head_pose_report=None, report=None, marker_map=None, neutral_frame: int = 0,
-                 smoothness: float | None = None, head_object=None, drop_unseen: bool = False,
-                 conjecture_unseen: bool = False, mode: str = "frames", n_modes: int = 8, progress=None) -> dict:
+                 smoothness: float | None = None, head_object=None, unseen: str = "conjecture", mode: str = "frames", n_modes: int = 8, progress=None,
+                 frame_start: int = 1) -> dict:
     """The whole ``mirrorcap retarget``. Every output is written only once all succeeded.
-    ``mode``/``n_modes``: how ``transfer`` keys the target (``bake``'s frame or PCA keys)."""
+    ``mode``/``n_modes``: how ``transfer`` keys the target (``bake``'s frame or PCA keys); keys from the scene
+    frame ``frame_start`` on."""
     if method not in METHODS:
         raise InputError(f"--method must be one of {', '.join(METHODS)}")
     if method == "transfer":
@@ -174,8 +176,8 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
             raise InputError("--smoothness belongs to --method arkit")
         return run_transfer(take, head_blend, target_blend, output, target_object=target_object,
                             head_pose_report=head_pose_report, report=report, marker_map=marker_map,
-                            neutral_frame=neutral_frame, head_object=head_object, drop_unseen=drop_unseen,
-                            conjecture_unseen=conjecture_unseen, mode=mode, n_modes=n_modes, progress=progress)
+                            neutral_frame=neutral_frame, head_object=head_object, unseen=unseen, mode=mode, n_modes=n_modes, progress=progress,
+                            frame_start=frame_start)
     t0 = time.perf_counter()
     data, F, pose, mapping, head, shape_keys, actor_name = _take_and_actor(take, head_blend, head_object,
                                                                             head_pose_report, marker_map,
@@ -183,16 +185,15 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     t1 = time.perf_counter()
     binding, solve, angles = retarget_take(head, shape_keys, data["labels"], data["points"],
                                            neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
-                                           unseen=unseen_policy(drop_unseen, conjecture_unseen), smoothness=smoothness)
+                                           unseen=unseen, smoothness=smoothness)
     t2 = time.perf_counter()
     open_blend(target_blend)
     target = find_target_object(target_object)
-    keyed = key_weights(target, solve.names, solve.weights)
-    scene = bpy.context.scene
-    scene.frame_start, scene.frame_end = 1, F
-    set_scene_rate(scene, data["rate"])
+    keyed = key_weights(target, solve.names, solve.weights, frame_start)
+    set_scene_rate(bpy.context.scene, data["rate"])
     result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
               "target_object": target.name, "output": str(output), "method": method, "frames": F,
+              "frame_start": int(frame_start),
               "rate": data["rate"], "markers": len(binding.labels), "registration": binding.registration,
               "landmark_rms_mm": binding.landmark_rms_mm, "solve_iterations": solve.iterations,
               "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"], **solve.report(),
@@ -209,8 +210,9 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
 
 
 def run_transfer(take, head_blend, target_blend, output, target_object=None, head_pose_report=None, report=None,
-                 marker_map=None, neutral_frame: int = 0, head_object=None, drop_unseen: bool = False,
-                 conjecture_unseen: bool = False, mode: str = "frames", n_modes: int = 8, progress=None) -> dict:
+                 marker_map=None, neutral_frame: int = 0, head_object=None, unseen: str = "conjecture",
+                 mode: str = "frames", n_modes: int = 8, progress=None,
+                 frame_start: int = 1) -> dict:
     """``mirrorcap retarget --method transfer``: the take's motion onto a character with landmarks
     and no shape keys (:func:`core.retarget.transfer.transfer_take`), keyed as ``bake`` keys a head."""
     if mode not in MODES:
@@ -227,10 +229,10 @@ def run_transfer(take, head_blend, target_blend, output, target_object=None, hea
     t1 = time.perf_counter()
     tr = transfer_take(head, shape_keys, target, data["labels"], data["points"], data["rate"],
                        neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
-                       unseen=unseen_policy(drop_unseen, conjecture_unseen),
+                       unseen=unseen,
                        progress=None if progress is None else (lambda f, text: progress(0.8 * f, text)))
     t2 = time.perf_counter()
-    keyed = bake_displacements(target_obj, target.vertices, tr.displacements, mode, n_modes,
+    keyed = bake_displacements(target_obj, target.vertices, tr.displacements, mode, n_modes, frame_start=frame_start,
                                progress=None if progress is None else (lambda f: progress(0.8 + 0.15 * f, "keys")))
     scene = bpy.context.scene
     set_scene_rate(scene, data["rate"])

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -26,27 +27,64 @@ UNSEEN_POLICIES = ("error", "drop", "conjecture")
 SPARSE_MARKERS = 40              # a take binding at most this many markers is sparse (a VICON-style layout)
 DENSE_BLINK_INTERVAL_S = 2.5     # Lin 2003, section 7.4
 SPARSE_BLINK_INTERVAL_S = 4.0    # Huang et al. 2000, section 3.2
+ANIMATION_BLOCK_FRAMES = 256     # frames deformed at a time when a take is written block by block (28 MB at 4,600 vertices)
 
 
 @dataclass
 class Animation:
-    """A take animated on a head: ``displacements (F, V, 3)`` in mm, head frame."""
+    """A take animated on a head: its frames ``frames[0]`` .. ``frames[1] - 1`` (the binding covers the whole
+    take). The vertex displacements ``(F, V, 3)`` (mm, head frame) come from the face rig when asked for: all at
+    once (:attr:`displacements`), at chosen frames (:meth:`at`) or a block of frames at a time (:meth:`blocks`),
+    so that a long take is written without holding them all (0.11 MB a frame for a 4,600-vertex head)."""
 
     binding: Binding
-    displacements: np.ndarray
-    parts: dict                       # the face rig's parts (jaw angle, blink per frame, ...)
+    rig: FaceRig
+    parts: dict                       # the face rig's parts per frame (jaw angle, blink, ...; FaceRig.motion)
     rate: float
+    frames: tuple                     # (START, END): the take frames animated, END exclusive
     timings_s: dict = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return self.frames[1] - self.frames[0]
+
+    def at(self, index) -> np.ndarray:
+        """The displacements ``(n, V, 3)`` at the animated frames ``index`` (a slice or indices, 0 = ``frames[0]``),
+        as the whole take's deformation has them there (blinks included)."""
+        if "displacements" in self.__dict__:               # computed already (the cached property below)
+            return self.displacements[index]
+        start, end = self.frames
+        return self.rig.deform(self.binding.displacements[start:end][index], self.rate,
+                               closure=self.parts["blink"][index])
+
+    def blocks(self, size: int = ANIMATION_BLOCK_FRAMES):
+        """``(offset, displacements (n, V, 3))`` for consecutive blocks of at most ``size`` frames."""
+        for f0 in range(0, self.n_frames, size):
+            yield f0, self.at(slice(f0, min(self.n_frames, f0 + size)))
+
+    @cached_property
+    def displacements(self) -> np.ndarray:
+        """All the animated frames' displacements ``(F, V, 3)``."""
+        return self.at(slice(None))
+
+    @property
+    def head_motion(self) -> tuple:
+        """The binding's head motion ``(R (F, 3, 3), t (F, 3))`` over the animated frames."""
+        R, t = self.binding.head_motion
+        start, end = self.frames
+        return R[start:end], t[start:end]
 
     def summary(self) -> dict:
         """The binding's and the rig's figures, as BAKE.json carries them."""
         b, parts = self.binding, self.parts
         return {
+            "take_frames": [int(self.frames[0]), int(self.frames[1])],
+            "take_length": int(len(b.displacements)),
             "landmarks_used": b.landmarks_used, "registration": b.registration,
             "markers_dropped_unseen": b.dropped, "markers_neutral_conjectured": b.conjectured_neutral,
             "landmark_rms_mm": b.landmark_rms_mm, "scale_head_mm_per_take_unit": b.scale,
             "binding_distance_mm": {"max": float(b.distance_mm.max()), "mean": float(b.distance_mm.mean())},
-            "gaps_filled": int(b.filled.sum()),
+            "gaps_filled": int(b.filled[self.frames[0]:self.frames[1]].sum()),
             "jaw_open_frames": int((parts["jaw_angle"] > 0).sum()),
             "max_jaw_angle_deg": float(np.rad2deg(parts["jaw_angle"].max())),
             "blink_frames": int((parts["blink"] > 0.5).sum()),
@@ -69,14 +107,17 @@ def head_pose_from_report(path, n_frames: int) -> np.ndarray:
 
 
 def unseen_policy(drop_unseen: bool = False, conjecture_unseen: bool = False) -> str:
-    """:func:`.bind.bind_take`'s ``unseen`` from the two user options (conjecture wins)."""
+    """:func:`.bind.bind_take`'s ``unseen`` from the add-on's two options (conjecture wins; neither: refuse)."""
     return "conjecture" if conjecture_unseen else "drop" if drop_unseen else "error"
 
 
 def animate_take(head: HeadModel, labels, points, rate: float, *, neutral_frame: int = 0, head_pose=None,
                  unseen: str = "error", settings: RigSettings | None = None, progress=None,
-                 marker_map: dict | None = None) -> Animation:
-    """Bind the take to ``head`` and run the face rig on every frame.
+                 marker_map: dict | None = None, frames: tuple | None = None) -> Animation:
+    """Bind the take to ``head`` and set up the face rig on every frame, or on the take frames
+    ``frames = (START, END)`` (END exclusive, None: the take's end; :func:`take_frame_range`): the
+    whole take is bound (its neutral frame may lie outside them), and the frames come out as they
+    do in the whole take's animation, blinks included.
 
     ``head_pose`` ``(F, 3, 4)`` is the tracker's (default: estimated from the markers);
     ``unseen`` says what happens to markers not seen in the neutral frame
@@ -87,6 +128,7 @@ def animate_take(head: HeadModel, labels, points, rate: float, *, neutral_frame:
     between the stages."""
     if unseen not in UNSEEN_POLICIES:
         raise InputError(f"unseen must be one of {', '.join(UNSEEN_POLICIES)}")
+    start, end = take_frame_range(frames, len(points))
     timings = {}
     t0 = time.perf_counter()
     if progress:
@@ -102,8 +144,19 @@ def animate_take(head: HeadModel, labels, points, rate: float, *, neutral_frame:
         progress(0.2, "face rig")
     t1 = time.perf_counter()
     rig = FaceRig(head, binding.vertices, settings)
-    D, parts = rig.deform(binding.displacements, fps=rate, with_parts=True)
+    closure = rig.closure(len(binding.displacements), rate)[start:end]      # the whole take's blinks
+    parts = rig.motion(binding.displacements[start:end], closure)
     timings["rig_s"] = time.perf_counter() - t1
     if progress:
         progress(0.9, "face rig")
-    return Animation(binding, D, parts, float(rate), timings)
+    return Animation(binding, rig, parts, float(rate), (start, end), timings)
+
+
+def take_frame_range(frames, n_frames: int) -> tuple[int, int]:
+    """``(START, END)`` of a take of ``n_frames`` frames (END exclusive; None: the take's end;
+    :func:`..capture.video.parse_frame_range` reads ``--frames START:END``), checked against the take."""
+    start, end = (0, None) if frames is None else frames
+    end = n_frames if end is None else int(end)
+    if not 0 <= start < end <= n_frames:
+        raise InputError(f"--frames {start}:{end} is not a stretch of the take's {n_frames} frames (0:{n_frames})")
+    return int(start), end

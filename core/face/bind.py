@@ -288,8 +288,8 @@ def bind_take(head: HeadModel, labels, points, neutral_frame: int = 0, head_pose
         raise InputError(f"the take's marker count changes: {len(missing)} of {M} markers are missing in the "
                          f"neutral frame {neutral_frame} ({', '.join(missing[:5])}{', ...' if len(missing) > 5 else ''}); "
                          "choose a neutral frame where every marker is seen, place such markers from their "
-                         "neighbours (--conjecture-unseen: a tracker's markers first seen later) or leave them out "
-                         "(--drop-unseen)")
+                         "neighbours (--conjecture-unseen, the commands' default: a tracker's markers first seen "
+                         "later) or leave them out (--drop-unseen)")
     head.validate()
     lms = head.landmarks()
     filled = ~valid

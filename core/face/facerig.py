@@ -353,19 +353,44 @@ class FaceRig:
         rot = _rotate(rel[None] - par[None], a, np.broadcast_to(theta[:, None], (len(theta), len(points))))
         return rot * stretch[:, None, None] + par[None] - rel[None]
 
-    def deform(self, marker_disp, fps: float = 30.0, with_parts: bool = False):
-        """Vertex displacements ``(F, V, 3)`` for marker displacements ``(F, M, 3)``."""
+    def closure(self, n_frames: int, fps: float) -> np.ndarray:
+        """The lids' closure ``(n_frames,)`` over a take of ``n_frames`` frames: its blinks (:func:`blink_closure`,
+        section 7.4), zero without eyelids or with ``blinks`` off."""
+        if not self.eyelids:
+            return np.zeros(n_frames)
+        interval = self.s.blink_interval_s if self.s.blink_interval_s is not None else 2.5
+        return blink_closure(n_frames, fps, interval, self.s.blink_duration_s, self.s.blink_seed)
+
+    def _controls(self, marker_disp):
+        """Marker displacements ``(F, M, 3)`` checked, as the controls' ``(F, C, 3)`` (fixed and hypothetical
+        points at 0), and the chin's displacement ``(F, 3)``."""
         U = np.asarray(marker_disp, float)
         n_m = self.marker_vertices.size
         if U.ndim != 3 or U.shape[1:] != (n_m, 3):
             raise InputError(f"marker displacements must have shape (frames, {n_m}, 3), not {U.shape}")
         if not np.all(np.isfinite(U)):
             raise InputError("marker displacements must be finite (fill gaps first)")
-        F, V = U.shape[0], self.head.vertices
-        n_c = self.controls.size
-        Uc = np.zeros((F, n_c, 3))
+        Uc = np.zeros((U.shape[0], self.controls.size, 3))
         Uc[:, :n_m] = U
-        chin = np.einsum("c,fcd->fd", self.chin_row, Uc[:, : n_m + self.fixed.size])
+        return Uc, np.einsum("c,fcd->fd", self.chin_row, Uc[:, : n_m + self.fixed.size])
+
+    def motion(self, marker_disp, closure) -> dict:
+        """The rig's per-frame parts without the vertices: the chin's displacement, the jaw's angle and stretch
+        (:meth:`jaw_motion`) and the lids' ``closure``."""
+        _, chin = self._controls(marker_disp)
+        theta, stretch = self.jaw_motion(chin)
+        return {"jaw_angle": theta, "jaw_stretch": stretch, "blink": np.asarray(closure, float), "chin": chin}
+
+    def deform(self, marker_disp, fps: float = 30.0, with_parts: bool = False, closure=None):
+        """Vertex displacements ``(F, V, 3)`` for marker displacements ``(F, M, 3)``. ``closure (F,)``: the lids'
+        closure per frame (default: the blinks of a take of these ``F`` frames at ``fps``, :meth:`closure`); a
+        stretch of a take passes the whole take's closure at its frames, so that it deforms as it does there."""
+        Uc, chin = self._controls(marker_disp)
+        F, V = Uc.shape[0], self.head.vertices
+        n_m = self.marker_vertices.size
+        closure = self.closure(F, fps) if closure is None else np.asarray(closure, float)
+        if closure.shape != (F,):
+            raise InputError(f"a closure per frame: ({F},), not {closure.shape}")
         theta, stretch = self.jaw_motion(chin)
         # jaw: rigid part at the jaw-moving vertices and at the controls, residual through the RBF
         J_ctrl = self._jaw_displacement(V[self.controls], theta, stretch)
@@ -400,10 +425,7 @@ class FaceRig:
             off = _rotate(np.broadcast_to(self.lip_offset, (F,) + self.lip_offset.shape), self.hinge_axis,
                           np.broadcast_to(theta[:, None], (F, self.inner.size)))
             D[:, self.inner] = H + off - V[self.inner]
-        closure = np.zeros(F)
         if self.eyelids:
-            interval = self.s.blink_interval_s if self.s.blink_interval_s is not None else 2.5
-            closure = blink_closure(F, fps, interval, self.s.blink_duration_s, self.s.blink_seed)
             shut = np.flatnonzero(closure > 0)  # blinks: a few frames of the take
             for lid in self.eyelids:
                 idx = lid["vertices"]

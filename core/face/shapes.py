@@ -7,6 +7,12 @@ displacements are stacked as columns of ``A (3V, F)``; the eigenvectors of
 ``e = A w / sqrt(λ)``), and ``A ≈ Eig_K (Eig_K^T A)``. The decomposition is not
 centred: the neutral face is the basis key, so a performance made of K shapes is
 reproduced exactly by K modes. Each mode is scaled so its weights peak at ±1.
+
+A long take is decomposed on :data:`PCA_BASIS_FRAMES` of its frames, evenly spread, and every frame is then
+projected on those modes a block at a time: ``A^T A`` of a 10-minute take at 60 frames/s would be a
+36,000-square matrix (10 GB), and the take's displacements 4 GB more. Measured on a 3,600-frame take at 60
+frames/s: 8 modes from 2,000 of its frames reconstruct it to 3.480 mm max, 0.0289 mm mean, against 3.487 / 0.0288
+from all of them (23 modes: 0.172 / 0.0003 against 0.171 / 0.0003), in a quarter of the time.
 """
 
 from __future__ import annotations
@@ -16,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..common.errors import InputError
+
+PCA_BASIS_FRAMES = 2000   # frames of a take the eigen-deformations are computed from (all of a shorter take)
 
 
 @dataclass
@@ -39,24 +47,58 @@ def _eigen_deformations(A, k: int):
     return E, lam
 
 
-def pca_shapes(displacements, n_modes: int) -> PCAShapes:
-    D = np.asarray(displacements, float)
-    if D.ndim != 3 or D.shape[2] != 3:
-        raise InputError("displacements must have shape (frames, vertices, 3)")
-    F, V, _ = D.shape
-    if not 1 <= n_modes <= min(F, 3 * V):
-        raise InputError(f"--modes must be between 1 and {min(F, 3 * V)} for this take")
-    A = D.reshape(F, 3 * V)                       # rows = frames (A^T of the text)
+class ArrayDisplacements:
+    """Displacements ``(F, V, 3)`` held in memory, served as :class:`..animate.Animation` serves them (``n_frames``,
+    ``at(index)``, ``blocks(size)``): the two kinds :func:`pca_shapes` and the shape-key writer take."""
+
+    def __init__(self, displacements):
+        self.array = np.asarray(displacements, float)
+        if self.array.ndim != 3 or self.array.shape[2] != 3:
+            raise InputError("displacements must have shape (frames, vertices, 3)")
+        self.n_frames = len(self.array)
+
+    def at(self, index) -> np.ndarray:
+        return self.array[index]
+
+    def blocks(self, size: int = 256):
+        for f0 in range(0, self.n_frames, size):
+            yield f0, self.array[f0:f0 + size]
+
+
+def displacement_source(displacements):
+    """``displacements`` as a source of frames: an :class:`..animate.Animation` (or any object with
+    ``n_frames``, ``at`` and ``blocks``) as it is, an array wrapped in :class:`ArrayDisplacements`."""
+    return displacements if hasattr(displacements, "blocks") else ArrayDisplacements(displacements)
+
+
+def pca_shapes(displacements, n_modes: int, basis_frames: int = PCA_BASIS_FRAMES) -> PCAShapes:
+    """K eigen-deformations of ``displacements`` (an array ``(F, V, 3)`` or a source of frames,
+    :func:`displacement_source`) and each frame's weights on them: the modes from ``basis_frames`` of the frames
+    evenly spread (all of them in a take of at most that many), the weights and the errors from every frame,
+    a block of frames at a time."""
+    src = displacement_source(displacements)
+    F = src.n_frames
+    basis = np.unique(np.linspace(0, F - 1, min(F, basis_frames)).round().astype(int))
+    S = src.at(basis)
+    V = S.shape[1]
+    if not 1 <= n_modes <= min(len(basis), 3 * V):
+        raise InputError(f"--modes must be between 1 and {min(len(basis), 3 * V)} for this take")
     k = n_modes
-    E, lam = _eigen_deformations(A, k)
-    coeff = A @ E.T                               # (F, K)
+    E, lam = _eigen_deformations(S.reshape(len(basis), 3 * V), k)   # rows = frames (A^T of the text)
+    del S
+    coeff = np.empty((F, k))
+    err_max, err_sum = 0.0, 0.0
+    for f0, block in src.blocks():
+        A = block.reshape(len(block), 3 * V)
+        c = coeff[f0:f0 + len(block)] = A @ E.T
+        err = np.linalg.norm((A - c @ E).reshape(len(block), V, 3), axis=2)
+        err_max, err_sum = max(err_max, float(err.max())), err_sum + float(err.sum())
     peak = np.abs(coeff).max(0)
     peak[peak == 0] = 1.0
     weights = coeff / peak
     modes = (E * peak[:, None]).reshape(k, V, 3)
-    err = np.linalg.norm((A - coeff @ E).reshape(F, V, 3), axis=2)
     total = max(float(lam.sum()), 1e-300)
-    return PCAShapes(modes=modes, weights=weights, max_error_mm=float(err.max()), mean_error_mm=float(err.mean()),
+    return PCAShapes(modes=modes, weights=weights, max_error_mm=err_max, mean_error_mm=err_sum / (F * V),
                      energy=lam[:k] / total)
 
 

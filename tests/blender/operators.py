@@ -129,6 +129,18 @@ out["bake_cancelled_unchanged"] = state() == before
 out["bake"] = call(bpy.ops.mirrorcap.bake, take=str(work / "take.c3d"))
 out["baked_keys"] = len([k for k in fitted.data.shape_keys.key_blocks if k.name.startswith("frame_")])
 out["bake_missing"] = call(bpy.ops.mirrorcap.bake, take=str(work / "missing.c3d"))
+# a stretch of the take, in a scene that starts at 1001 (a pipeline's shot): keyed from there
+scene.frame_start = 1001
+out["bake_stretch"] = call(bpy.ops.mirrorcap.bake, take=str(work / "take.c3d"), take_start=3, take_end=10)
+out["stretch_keys"] = len([k for k in fitted.data.shape_keys.key_blocks if k.name.startswith("frame_")])
+out["stretch_scene_frames"] = [scene.frame_start, scene.frame_end]
+first_key = [fc for fc in fitted.data.shape_keys.animation_data.action.layers[0].strips[0].channelbags[0].fcurves
+             if fc.data_path == 'key_blocks["frame_00001"].value'][0]
+out["stretch_first_key"] = [first_key.evaluate(f) for f in (1000, 1001, 1002)]
+objects_before = set(bpy.data.objects)
 out["import_take"] = call(bpy.ops.mirrorcap.import_take, filepath=str(work / "take.c3d"))
 out["scene_frames"] = [scene.frame_start, scene.frame_end]
+marker = next(o for o in bpy.data.objects if o not in objects_before and "mirrorcap_label" in o and o.animation_data)
+out["take_key_frames"] = sorted({int(k.co[0]) for fc in marker.animation_data.action.layers[0].strips[0].channelbags[0].fcurves
+                                 for k in fc.keyframe_points})[:2]
 print("RESULT " + json.dumps(out))
