@@ -230,7 +230,7 @@ def demo_mirrors(args) -> int:
 
 
 def _take_frames(args) -> tuple[int, int | None]:
-    """``--frames START:END`` of ``bake`` and ``batch``, read before Blender starts."""
+    """``--frames START:END`` of ``bake``, ``batch`` and ``retarget``, read before Blender starts."""
     from ..core.capture.video import parse_frame_range
 
     return parse_frame_range(args.frames)
@@ -280,6 +280,7 @@ def _print_missing_shapes(res) -> None:
 
 
 def retarget(args) -> int:
+    frames = _take_frames(args)
     with interrupts_held():     # Blender loads here (cli/interrupts.py)
         from ..addon.retarget.retarget import run_livelink, run_retarget
 
@@ -287,7 +288,7 @@ def retarget(args) -> int:
         if args.csv:
             raise MirrorCapError("--csv writes the CSV of a C3D take; the take is already a CSV")
         res = run_livelink(args.take, args.target, args.output, target_object=args.target_object, rate=args.rate,
-                           report=args.report, frame_start=args.frame_start)
+                           report=args.report, frames=frames, frame_start=args.frame_start)
         if not args.quiet:
             print(f"keyed {res['frames']} frames of {args.take} onto {res['target_object']}: "
                   f"{len(res['shapes_keyed'])} ARKit shapes at {res['rate']:.3g} frames/s"
@@ -304,7 +305,7 @@ def retarget(args) -> int:
                        method=args.method, csv=args.csv, head_pose_report=args.head_pose, report=args.report,
                        marker_map=args.marker_map, neutral_frame=args.neutral_frame, smoothness=args.smoothness,
                        head_object=args.head_object, unseen=args.unseen, mode=args.mode, n_modes=args.modes,
-                       frame_start=args.frame_start)
+                       frames=frames, frame_start=args.frame_start)
     if args.method == "transfer":
         if not args.quiet:
             sc = res["region_scales"]

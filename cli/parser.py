@@ -114,8 +114,8 @@ def _keying_options(parser, take_range: bool = False) -> None:
                              "(default 1; e.g. 1001 for a pipeline's shots)")
     if take_range:
         parser.add_argument("--frames", metavar="START:END",
-                            help="the take frames to bake, 0-based, END exclusive (default: all); the whole take is "
-                                 "bound, and its frames come out as in a bake of the whole take, blinks included")
+                            help="the take frames to key, 0-based, END exclusive (default: all); the whole take is "
+                                 "bound, and its frames come out as they do from the whole take, blinks included")
 
 
 def _bake_options(parser) -> None:
@@ -344,7 +344,7 @@ def _blender_commands(sub) -> None:
                      help="transfer: one shape key per frame (default) or PCA keys, as bake writes them")
     ret.add_argument("--modes", type=int, default=8, help="transfer --mode pca: number of keys (default 8)")
     ret.add_argument("--csv", help="LIVELINK.csv to write (Live Link Face format)")
-    _keying_options(ret)
+    _keying_options(ret, take_range=True)
     _binding_options(ret)
     ret.add_argument("--smoothness", type=float, help="temporal smoothness lambda in mm^2 (default 8)")
     ret.add_argument("--report", help="RETARGET.json to write")

@@ -253,6 +253,33 @@ def test_retarget_keys_from_a_pipelines_start_frame(tmp_path, head_and_keys):
     assert len(cols) == 52 and np.abs(rb["values"] - W[:, cols]).max() < 1e-4    # row f at frame 1001 + f
 
 
+@pytest.mark.parametrize("method", ["arkit", "transfer"])
+def test_retarget_a_stretch_of_a_take_at_a_pipelines_start_frame(tmp_path, head_and_keys, method):
+    """`--frames 12:30 --frame-start 1001`: the stretch is keyed at scene frames 1001..1018, and the character
+    there looks as the whole take's retarget has it at its frames 13..30 (the whole take bound and solved), by
+    both methods."""
+    head, keys = head_and_keys
+    labels, pts, _ = arkit_take(head, keys, frames=40, seed=12)
+    write_c3d(tmp_path / "take.c3d", labels, pts, 30.0)
+    _character(head, keys, tmp_path, landmarks=method == "transfer", with_keys=method == "arkit")
+    seen = {}
+    for name, extra in (("whole", []), ("part", ["--frames", "12:30", "--frame-start", "1001"])):
+        res = _run(["-m", "mirrorcap", "retarget", tmp_path / "take.c3d", "--head", HEAD_BLEND, "--target",
+                    tmp_path / "target.blend", "-o", tmp_path / f"{name}.blend", "--method", method,
+                    "--report", tmp_path / f"{name}.json", *extra])
+        assert res.returncode == 0, res.stdout + res.stderr
+        r = _run([ROOT / "tests" / "blender" / "readback.py", tmp_path / f"{name}.blend", "Character",
+                  tmp_path / f"{name}.npz"])
+        assert r.returncode == 0, r.stdout + r.stderr
+        seen[name] = np.load(tmp_path / f"{name}.npz")
+    report = json.loads((tmp_path / "part.json").read_text())
+    assert report["frames"] == 18 and report["take_frames"] == [12, 30] and report["frame_start"] == 1001
+    assert list(seen["part"]["frames"]) == list(range(1001, 1019)) and list(seen["whole"]["frames"]) == list(range(1, 41))
+    whole, part = seen["whole"]["evaluated"][12:30], seen["part"]["evaluated"]
+    assert np.abs(whole - whole[:1]).max() > 2e-3                 # the stretch moves (metres)
+    assert np.abs(part - whole).max() < 1e-6                       # 1 micrometre, at every keyed frame
+
+
 def test_timecodes_tell_a_csv_takes_rate():
     """The rows per second of the clock, over the seconds a take spans whole; None where they cannot tell."""
     for rate in (24.0, 30.0, 60.0):

@@ -22,7 +22,7 @@ import numpy as np
 
 from ...core.common.errors import InputError
 from ...core.common.files import write_files_atomically
-from ...core.face.animate import head_pose_from_report
+from ...core.face.animate import head_pose_from_report, take_frame_range
 from ...core.face.bind import load_marker_map
 from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_take, shape_name_key
 from ...core.retarget.livelink import livelink_csv, read_livelink_csv, timecode_rate
@@ -103,7 +103,7 @@ RATE_DISAGREEMENT = 0.02
 
 
 def run_livelink(csv_path, target_blend, output, target_object=None, rate: float | None = None, report=None,
-                 frame_start: int = 1) -> dict:
+                 frames=None, frame_start: int = 1) -> dict:
     """Key a character from a Live Link Face CSV (an iPhone take, or one MirrorCap wrote): its
     52 weights on the target's shape keys of the same names, one CSV row per frame. The scene plays at ``rate``,
     else at the rate the rows' timecodes keep (:func:`core.retarget.livelink.timecode_rate`), else at
@@ -118,7 +118,9 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
     weights = np.clip(table["weights"], 0.0, 1.0)
     if not len(weights):
         raise InputError(f"{csv_path} has no frames")
-    kept = timecode_rate(table["timecodes"])
+    kept = timecode_rate(table["timecodes"])                 # from the whole take's rows
+    start, end = take_frame_range(frames, len(weights))
+    weights = weights[start:end]
     warnings = []
     if rate is None:
         rate, source = (kept, "timecodes") if kept else (LIVELINK_DEFAULT_RATE, "default")
@@ -134,7 +136,8 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
     set_scene_rate(bpy.context.scene, rate)
     save_blend_atomically(output)
     result = {"csv": str(csv_path), "target": str(target_blend), "target_object": target.name, "output": str(output),
-              "frames": len(weights), "frame_start": int(frame_start), "rate": rate, "rate_source": source,
+              "frames": len(weights), "take_frames": [start, end], "frame_start": int(frame_start), "rate": rate,
+              "rate_source": source,
               "timecode_rate": kept,
               "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"],
               "missing_csv_columns": table["missing_columns"], "warnings": warnings}
@@ -162,11 +165,12 @@ def _take_and_actor(take, head_blend, head_object, head_pose_report, marker_map,
 
 def run_retarget(take, head_blend, target_blend, output, target_object=None, method: str = "arkit",
                  csv=None, head_pose_report=None, report=None, marker_map=None, neutral_frame: int = 0,
-                 smoothness: float | None = None, head_object=None, unseen: str = "conjecture", mode: str = "frames", n_modes: int = 8, progress=None,
-                 frame_start: int = 1) -> dict:
+                 smoothness: float | None = None, head_object=None, unseen: str = "conjecture", mode: str = "frames",
+                 n_modes: int = 8, progress=None, frames=None, frame_start: int = 1) -> dict:
     """The whole ``mirrorcap retarget``. Every output is written only once all succeeded.
-    ``mode``/``n_modes``: how ``transfer`` keys the target (``bake``'s frame or PCA keys); keys from the scene
-    frame ``frame_start`` on."""
+    ``mode``/``n_modes``: how ``transfer`` keys the target (``bake``'s frame or PCA keys). ``frames``: the take
+    frames ``(START, END)`` to key (END exclusive, None: to the end; the whole take is bound and solved, so each
+    comes out as in the whole take's retarget), keyed from the scene frame ``frame_start`` on."""
     if method not in METHODS:
         raise InputError(f"--method must be one of {', '.join(METHODS)}")
     if method == "transfer":
@@ -176,24 +180,26 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
             raise InputError("--smoothness belongs to --method arkit")
         return run_transfer(take, head_blend, target_blend, output, target_object=target_object,
                             head_pose_report=head_pose_report, report=report, marker_map=marker_map,
-                            neutral_frame=neutral_frame, head_object=head_object, unseen=unseen, mode=mode, n_modes=n_modes, progress=progress,
-                            frame_start=frame_start)
+                            neutral_frame=neutral_frame, head_object=head_object, unseen=unseen, mode=mode,
+                            n_modes=n_modes, progress=progress, frames=frames, frame_start=frame_start)
     t0 = time.perf_counter()
     data, F, pose, mapping, head, shape_keys, actor_name = _take_and_actor(take, head_blend, head_object,
                                                                             head_pose_report, marker_map,
                                                                             (output, csv, report))
+    start, end = take_frame_range(frames, F)
     t1 = time.perf_counter()
     binding, solve, angles = retarget_take(head, shape_keys, data["labels"], data["points"],
                                            neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
                                            unseen=unseen, smoothness=smoothness)
+    weights, angles = solve.weights[start:end], angles[start:end]
     t2 = time.perf_counter()
     open_blend(target_blend)
     target = find_target_object(target_object)
-    keyed = key_weights(target, solve.names, solve.weights, frame_start)
+    keyed = key_weights(target, solve.names, weights, frame_start)
     set_scene_rate(bpy.context.scene, data["rate"])
     result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
-              "target_object": target.name, "output": str(output), "method": method, "frames": F,
-              "frame_start": int(frame_start),
+              "target_object": target.name, "output": str(output), "method": method, "frames": end - start,
+              "take_frames": [start, end], "take_length": F, "frame_start": int(frame_start),
               "rate": data["rate"], "markers": len(binding.labels), "registration": binding.registration,
               "landmark_rms_mm": binding.landmark_rms_mm, "solve_iterations": solve.iterations,
               "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"], **solve.report(),
@@ -201,7 +207,7 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     save_blend_atomically(output)
     files = {}
     if csv is not None:
-        files[Path(csv)] = livelink_csv(solve.weights, solve.names, data["rate"], head=angles)
+        files[Path(csv)] = livelink_csv(weights, solve.names, data["rate"], head=angles)
     result["timings_s"]["total_s"] = time.perf_counter() - t0
     if report is not None:
         files[Path(report)] = json.dumps(result, indent=1) + "\n"
@@ -211,8 +217,7 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
 
 def run_transfer(take, head_blend, target_blend, output, target_object=None, head_pose_report=None, report=None,
                  marker_map=None, neutral_frame: int = 0, head_object=None, unseen: str = "conjecture",
-                 mode: str = "frames", n_modes: int = 8, progress=None,
-                 frame_start: int = 1) -> dict:
+                 mode: str = "frames", n_modes: int = 8, progress=None, frames=None, frame_start: int = 1) -> dict:
     """``mirrorcap retarget --method transfer``: the take's motion onto a character with landmarks
     and no shape keys (:func:`core.retarget.transfer.transfer_take`), keyed as ``bake`` keys a head."""
     if mode not in MODES:
@@ -221,15 +226,16 @@ def run_transfer(take, head_blend, target_blend, output, target_object=None, hea
     data, F, pose, mapping, head, shape_keys, actor_name = _take_and_actor(take, head_blend, head_object,
                                                                             head_pose_report, marker_map,
                                                                             (output, report))
-    if mode == "pca" and not 1 <= n_modes <= F:
-        raise InputError(f"--modes must be between 1 and the take's {F} frames")
+    start, end = take_frame_range(frames, F)
+    if mode == "pca" and not 1 <= n_modes <= end - start:
+        raise InputError(f"--modes must be between 1 and the {end - start} frames keyed")
     open_blend(target_blend)
     target_obj = find_landmarked_object(target_object)
     target = read_head(target_obj)
     t1 = time.perf_counter()
     tr = transfer_take(head, shape_keys, target, data["labels"], data["points"], data["rate"],
                        neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
-                       unseen=unseen,
+                       unseen=unseen, frames=(start, end),
                        progress=None if progress is None else (lambda f, text: progress(0.8 * f, text)))
     t2 = time.perf_counter()
     keyed = bake_displacements(target_obj, target.vertices, tr.displacements, mode, n_modes, frame_start=frame_start,
@@ -238,7 +244,8 @@ def run_transfer(take, head_blend, target_blend, output, target_object=None, hea
     set_scene_rate(scene, data["rate"])
     t3 = time.perf_counter()
     result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
-              "target_object": target_obj.name, "output": str(output), "method": "transfer", "frames": F,
+              "target_object": target_obj.name, "output": str(output), "method": "transfer", "frames": end - start,
+              "take_frames": [start, end], "take_length": F,
               "rate": data["rate"], "markers": len(tr.binding.labels), **keyed, **tr.report(),
               "timings_s": {"read_s": t1 - t0, "transfer_s": t2 - t1, "keys_s": t3 - t2}}
     save_blend_atomically(output)

@@ -359,11 +359,15 @@ def correspond(actor: HeadModel, target: HeadModel, rounds: int = 4, reach_mm: f
 
 
 def actor_motion(head: HeadModel, shape_keys: dict | None, binding: Binding, rate: float,
-                 settings: RigSettings | None = None) -> tuple[np.ndarray, dict]:
-    """The actor head's dense motion ``(F, Va, 3)`` (step 1 of the module text) and its parts:
-    ``weights`` (the ARKit prior's, or None), ``blink``."""
+                 settings: RigSettings | None = None, frames: tuple | None = None) -> tuple[np.ndarray, dict]:
+    """The actor head's dense motion ``(F, Va, 3)`` (step 1 of the module text) at the take frames ``frames =
+    (START, END)`` (default: all) and its parts there: ``weights`` (the ARKit prior's, or None), ``blink``. The
+    prior is solved over the whole take and the lids blink as in the whole take, so a stretch moves as it does
+    there."""
     settings = settings or RigSettings()
-    F = binding.displacements.shape[0]
+    n_take = binding.displacements.shape[0]
+    start, end = (0, n_take) if frames is None else frames
+    F = end - start
     prior = np.zeros((F, len(head.vertices), 3))
     parts = {"weights": None, "names": [], "prior_residual_mm": None}
     arkit = {}
@@ -377,12 +381,14 @@ def actor_motion(head: HeadModel, shape_keys: dict | None, binding: Binding, rat
         solve = solve_weights(arkit["basis"], binding.displacements, arkit["names"])
         by_lower = {k.lower(): k for k in shape_keys}
         S = np.stack([np.asarray(shape_keys[by_lower[n.lower()]], float) for n in solve.names])   # (K, Va, 3)
-        prior = (solve.weights @ S.reshape(len(S), -1)).reshape(F, -1, 3)              # one BLAS product
-        parts.update(weights=solve.weights, names=solve.names, prior_residual_mm=solve.residual_mm)
+        weights = solve.weights[start:end]
+        prior = (weights @ S.reshape(len(S), -1)).reshape(F, -1, 3)                    # one BLAS product
+        parts.update(weights=weights, names=solve.names, prior_residual_mm=solve.residual_mm[start:end])
         if any(n.lower().startswith("eyeblink") for n in solve.names):
             settings = replace(settings, blinks=False)        # the prior closes the lids as the actor's do
     rig = FaceRig(head, binding.vertices, settings)
-    D, rig_parts = rig.deform(binding.displacements - prior[:, binding.vertices], fps=rate, with_parts=True)
+    D, rig_parts = rig.deform(binding.displacements[start:end] - prior[:, binding.vertices], fps=rate, with_parts=True,
+                              closure=rig.closure(n_take, rate)[start:end])
     parts.update(jaw_angle=rig_parts["jaw_angle"], blink=rig_parts["blink"])
     return prior + D, parts
 
@@ -443,8 +449,9 @@ class Transfer:
 
 def transfer_take(actor: HeadModel, shape_keys: dict | None, target: HeadModel, labels, points, rate: float, *,
                   neutral_frame: int = 0, head_pose=None, marker_map: dict | None = None, unseen: str = "error",
-                  settings: RigSettings | None = None, progress=None) -> Transfer:
-    """The whole transfer (module text): bind, the actor's dense motion, correspondence, scaling."""
+                  settings: RigSettings | None = None, progress=None, frames: tuple | None = None) -> Transfer:
+    """The whole transfer (module text): bind, the actor's dense motion, correspondence, scaling; of the take
+    frames ``frames = (START, END)`` (default: all; the whole take bound, :func:`actor_motion`)."""
     check_landmarks(target, "target")
     if progress:
         progress(0.05, "binding")
@@ -452,7 +459,7 @@ def transfer_take(actor: HeadModel, shape_keys: dict | None, target: HeadModel, 
                         marker_map=marker_map, unseen=unseen)
     if progress:
         progress(0.2, "actor motion")
-    motion, parts = actor_motion(actor, shape_keys, binding, rate, settings)
+    motion, parts = actor_motion(actor, shape_keys, binding, rate, settings, frames)
     if progress:
         progress(0.45, "correspondence")
     corr = correspond(actor, target)
