@@ -196,10 +196,11 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
             from ...core.face.facerig import RigSettings
 
             anim = animate_take(head, data["labels"], data["points"], data["rate"], neutral_frame=self.neutral_frame,
-                                head_pose=pose, unseen=self.unseen(), settings=RigSettings(blinks=self.blinks, blink_seed=self.blink_seed,
-                                                                           blink_interval_s=None),
-                                progress=progress, marker_map=mapping, frames=frames)
-            anim.displacements                  # the face rig's work, here where it can be cancelled
+                                head_pose=pose, unseen=self.unseen(),
+                                settings=RigSettings(blinks=self.blinks, blink_seed=self.blink_seed, blink_interval_s=None),
+                                progress=lambda f, text: progress(0.3 * f, text), marker_map=mapping, frames=frames)
+            # the face rig's work, here where it can be cancelled
+            anim.deform_all(lambda f: progress(0.3 + 0.65 * f, "face rig"))
             return head, anim
 
         return work

@@ -64,8 +64,23 @@ class Animation:
 
     @cached_property
     def displacements(self) -> np.ndarray:
-        """All the animated frames' displacements ``(F, V, 3)``."""
-        return self.at(slice(None))
+        """All the animated frames' displacements ``(F, V, 3)`` (:meth:`deform_all`)."""
+        return self.deform_all()
+
+    def deform_all(self, progress=None) -> np.ndarray:
+        """All the animated frames' displacements ``(F, V, 3)``, deformed a block of frames at a time with
+        ``progress(fraction)`` after each, and kept as :attr:`displacements`."""
+        if "displacements" in self.__dict__:
+            return self.displacements
+        D = None
+        for f0, block in self.blocks():
+            if D is None:
+                D = np.empty((self.n_frames,) + block.shape[1:])
+            D[f0:f0 + len(block)] = block
+            if progress:
+                progress((f0 + len(block)) / self.n_frames)
+        self.__dict__["displacements"] = D
+        return D
 
     @property
     def head_motion(self) -> tuple:
