@@ -22,12 +22,12 @@ from ..geometry.rigid import rotation_zyx
 from .bind import Binding, bind_take
 from .facerig import FaceRig, RigSettings
 from .head import HeadModel
+from .shapes import BLOCK_FRAMES
 
 UNSEEN_POLICIES = ("error", "drop", "conjecture")
 SPARSE_MARKERS = 40              # a take binding at most this many markers is sparse (a VICON-style layout)
 DENSE_BLINK_INTERVAL_S = 2.5     # Lin 2003, section 7.4
 SPARSE_BLINK_INTERVAL_S = 4.0    # Huang et al. 2000, section 3.2
-ANIMATION_BLOCK_FRAMES = 256     # frames deformed at a time when a take is written block by block (28 MB at 4,600 vertices)
 
 
 @dataclass
@@ -57,7 +57,7 @@ class Animation:
         return self.rig.deform(self.binding.displacements[start:end][index], self.rate,
                                closure=self.parts["blink"][index])
 
-    def blocks(self, size: int = ANIMATION_BLOCK_FRAMES):
+    def blocks(self, size: int = BLOCK_FRAMES):
         """``(offset, displacements (n, V, 3))`` for consecutive blocks of at most ``size`` frames."""
         for f0 in range(0, self.n_frames, size):
             yield f0, self.at(slice(f0, min(self.n_frames, f0 + size)))

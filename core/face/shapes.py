@@ -24,6 +24,7 @@ import numpy as np
 from ..common.errors import InputError
 
 PCA_BASIS_FRAMES = 2000   # frames of a take the eigen-deformations are computed from (all of a shorter take)
+BLOCK_FRAMES = 256        # frames deformed, projected or written at a time (28 MB of displacements at 4,600 vertices)
 
 
 @dataclass
@@ -60,7 +61,7 @@ class ArrayDisplacements:
     def at(self, index) -> np.ndarray:
         return self.array[index]
 
-    def blocks(self, size: int = 256):
+    def blocks(self, size: int = BLOCK_FRAMES):
         for f0 in range(0, self.n_frames, size):
             yield f0, self.array[f0:f0 + size]
 
