@@ -20,7 +20,7 @@ from ...core.face.facerig import RigSettings
 from ...core.retarget.mpeg4 import read_fap, replay_take
 from ...core.take.c3d import read_c3d
 from ..common.keys import set_scene_rate
-from ..common.shape_keys import MODES, bake_displacements
+from ..common.shape_keys import bake_displacements, check_keying
 from ..common.headio import find_head_object, head_feature_points, open_blend, read_head, save_blend_atomically
 
 #: a frames-mode bake of more frames than this is warned about (one shape key a frame)
@@ -50,8 +50,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
     head instead of a take (:func:`core.retarget.mpeg4.replay_take`; ``take`` is then None).
     ``frames``: the take frames ``(START, END)`` to bake (END exclusive, None: to the end; the whole
     take is bound), keyed from the scene frame ``frame_start`` on."""
-    if mode not in MODES:
-        raise InputError(f"--mode must be one of {', '.join(MODES)}")
+    check_keying(mode, n_modes)
     if (take is None) == (fap is None):
         raise InputError("give either a take (TAKE.c3d) or --fap TAKE.fap")
     timings = {}
@@ -67,8 +66,7 @@ def run_bake(take, head_blend, output, object_name=None, mode: str = "frames", n
         F = data["points"].shape[0]
         pose = None if head_pose_report is None else head_pose_from_report(head_pose_report, F)
     start, end = take_frame_range(frames, F)
-    if mode == "pca" and not 1 <= n_modes <= end - start:
-        raise InputError(f"--modes must be between 1 and the {end - start} frames baked")
+    check_keying(mode, n_modes, end - start)
     open_blend(head_blend)
     obj = find_head_object(object_name)
     head = read_head(obj)

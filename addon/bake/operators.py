@@ -186,9 +186,10 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
             mapping = scene_marker_map(context)
         from ...core.face.animate import take_frame_range
 
+        from ..common.shape_keys import check_keying
+
         frames = take_frame_range((self.take_start, self.take_end or None), data["points"].shape[0])
-        if self.mode == "pca" and self.modes > frames[1] - frames[0]:
-            raise InputError(f"Modes must be at most the {frames[1] - frames[0]} frames baked")
+        check_keying(self.mode, self.modes, frames[1] - frames[0], modes_option="Modes")
         self._obj_name = obj.name
 
         def work(progress):

@@ -33,16 +33,24 @@ def _clear_mirrorcap_keys(obj):
         obj.shape_key_remove(kb)
 
 
+def check_keying(mode: str, n_modes: int, n_frames: int | None = None, modes_option: str = "--modes") -> None:
+    """A bake's ``mode`` (:data:`MODES`) and, in pca mode, its ``n_modes`` against the ``n_frames`` to key, checked
+    before any work (``modes_option``: how the user names the number of modes)."""
+    if mode not in MODES:
+        raise InputError(f"--mode must be one of {', '.join(MODES)}")
+    if n_frames is not None and mode == "pca" and not 1 <= n_modes <= n_frames:
+        raise InputError(f"{modes_option} must be between 1 and the {n_frames} frames keyed")
+
+
 def bake_displacements(obj, neutral_mm, displacements, mode: str = "frames", n_modes: int = 8,
                        frame_start: int = 1, head_motion=None, progress=None) -> dict:
     """Write ``displacements (F, V, 3)`` (core mm, head frame: an array, or an :class:`core.face.animate.Animation`
     whose frames are deformed a block at a time as they are written, so that a long take never has them all in
     memory) onto ``obj`` as shape keys, keyed from the scene frame ``frame_start`` on (the scene's frame range is
     set to the keyed frames)."""
-    if mode not in MODES:
-        raise InputError(f"--mode must be one of {', '.join(MODES)}")
     src = displacement_source(displacements)
     F, V = src.n_frames, len(neutral_mm)
+    check_keying(mode, n_modes, F)
     if V != len(obj.data.vertices):
         raise InputError(f"{V} displacements for a head of {len(obj.data.vertices)} vertices")
     axes = object_axes(obj)
@@ -105,7 +113,7 @@ def _head_motion_keys(obj, R, t):
     world = np.array(obj.matrix_world, float)
     parent = world @ np.linalg.inv(np.array(obj.matrix_basis, float))      # identity when not parented
     moved = np.tile(np.eye(4), (len(R), 1, 1))
-    moved[:, :3, :3] = np.array([core_rotation_to_blender(r) for r in R]) @ world[:3, :3]
+    moved[:, :3, :3] = core_rotation_to_blender(R) @ world[:3, :3]
     moved[:, :3, 3] = world[:3, 3] + core_to_blender(t)
     basis = np.linalg.inv(parent) @ moved
     return basis[:, :3, 3], _quaternions(_rotation_of(basis[:, :3, :3]))

@@ -80,6 +80,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         from ...core.retarget.transfer import check_landmarks
         from ...core.take.c3d import read_c3d
         from ..common.headio import read_head, read_shape_keys
+        from ..common.shape_keys import check_keying
 
         data = read_c3d(required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)"))
         head = read_head(actor)
@@ -90,8 +91,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         mapping = scene_marker_map(context)
         self._target, self._rate = target.name, data["rate"]
         self._mode, self._modes = (s.bake_mode if self.mode == "SCENE" else self.mode), s.modes
-        if self._mode == "pca" and not 1 <= self._modes <= len(data["points"]):
-            raise InputError(f"Modes must be between 1 and the take's {len(data['points'])} frames")
+        check_keying(self._mode, self._modes, len(data["points"]), modes_option="Modes")
 
         def work(progress):
             from ...core.retarget.transfer import transfer_take

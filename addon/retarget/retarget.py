@@ -28,7 +28,7 @@ from ...core.retarget.arkit import ARKIT_SHAPES, match_shape_names, retarget_tak
 from ...core.retarget.livelink import livelink_csv, read_livelink_csv, timecode_rate
 from ...core.retarget.transfer import TRANSFER_LANDMARKS, transfer_take
 from ...core.take.c3d import read_c3d
-from ..common.shape_keys import MODES, bake_displacements
+from ..common.shape_keys import bake_displacements, check_keying
 from ..common.headio import find_head_object, open_blend, read_head, read_shape_keys, save_blend_atomically
 from ..common.keys import key_fcurves, keyed_frames, set_scene_rate
 
@@ -79,7 +79,7 @@ def key_weights(obj, solved_names, weights, frame_start: int = 1) -> dict:
     key = obj.data.shape_keys
     if key is None:
         raise InputError(f"{obj.name} has no shape keys")
-    weights = np.asarray(weights)
+    weights = np.asarray(weights, float)
     found, missing = match_shape_names([kb.name for kb in key.key_blocks if kb != key.reference_key], solved_names)
     if not found:
         raise InputError(f"{obj.name} has none of the ARKit shape keys (eyeBlinkLeft, jawOpen, ...)")
@@ -92,7 +92,7 @@ def key_weights(obj, solved_names, weights, frame_start: int = 1) -> dict:
     for t in targets:
         key.key_blocks[t].value = 0.0
     frames = keyed_frames(bpy.context.scene, frame_start, weights.shape[0])
-    key_fcurves(key, action, targets, frames, np.asarray(weights)[:, cols].T, "LINEAR")
+    key_fcurves(key, action, targets, frames, weights[:, cols].T, "LINEAR")
     return {"keyed": targets, "missing": missing}
 
 
@@ -137,8 +137,7 @@ def run_livelink(csv_path, target_blend, output, target_object=None, rate: float
     save_blend_atomically(output)
     result = {"csv": str(csv_path), "target": str(target_blend), "target_object": target.name, "output": str(output),
               "frames": len(weights), "take_frames": [start, end], "frame_start": int(frame_start), "rate": rate,
-              "rate_source": source,
-              "timecode_rate": kept,
+              "rate_source": source, "timecode_rate": kept,
               "shapes_keyed": keyed["keyed"], "missing_shape_names": keyed["missing"],
               "missing_csv_columns": table["missing_columns"], "warnings": warnings}
     if report is not None:
@@ -220,15 +219,13 @@ def run_transfer(take, head_blend, target_blend, output, target_object=None, hea
                  mode: str = "frames", n_modes: int = 8, progress=None, frames=None, frame_start: int = 1) -> dict:
     """``mirrorcap retarget --method transfer``: the take's motion onto a character with landmarks
     and no shape keys (:func:`core.retarget.transfer.transfer_take`), keyed as ``bake`` keys a head."""
-    if mode not in MODES:
-        raise InputError(f"--mode must be one of {', '.join(MODES)}")
+    check_keying(mode, n_modes)
     t0 = time.perf_counter()
     data, F, pose, mapping, head, shape_keys, actor_name = _take_and_actor(take, head_blend, head_object,
                                                                             head_pose_report, marker_map,
                                                                             (output, report))
     start, end = take_frame_range(frames, F)
-    if mode == "pca" and not 1 <= n_modes <= end - start:
-        raise InputError(f"--modes must be between 1 and the {end - start} frames keyed")
+    check_keying(mode, n_modes, end - start)
     open_blend(target_blend)
     target_obj = find_landmarked_object(target_object)
     target = read_head(target_obj)

@@ -85,14 +85,17 @@ def blink_closure(n_frames: int, fps: float, interval_s: float = 2.5, duration_s
     gaps = np.maximum(rng.gamma(4.0, interval_s / 4.0, n_draw), 2 * duration_s)
     onsets = np.cumsum(gaps) - gaps[0] * rng.uniform(0.3, 1.0)
     onsets = onsets[(onsets > -duration_s) & (onsets < T)]
-    t = np.arange(n_frames) / fps
-    s = t[:, None] - onsets[None, :]                       # (F, B) time since each onset
+    # each blink's own few frames (B, k), not every frame against every blink: a long take has hundreds of blinks
+    frame = np.floor(onsets * fps).astype(int)[:, None] - 1 + np.arange(int(np.ceil(duration_s * fps)) + 3)
+    s = frame / fps - onsets[:, None]                      # time since the blink's onset
     close, hold = 0.4 * duration_s, 0.6 * duration_s
     up = np.clip(s / close, 0, 1)
     down = np.clip((s - close) / hold, 0, 1)
     shape = np.where(s < close, np.sin(0.5 * np.pi * up) ** 2, np.cos(0.5 * np.pi * down) ** 2)
-    shape[(s < 0) | (s > duration_s)] = 0.0
-    return shape.max(axis=1, initial=0.0)
+    inside = (s >= 0) & (s <= duration_s) & (frame >= 0) & (frame < n_frames)
+    closure = np.zeros(n_frames)
+    np.maximum.at(closure, frame[inside], shape[inside])
+    return closure
 
 
 DEFORM_BLOCK_FRAMES = 64  # frames per BLAS product in FaceRig.deform (a 7 MB buffer at 4,600 vertices)
