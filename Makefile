@@ -76,7 +76,10 @@ contact-sheet: $(STAMP)
 # on; many1080 (1920x1080, 350 dots of 2 mm, mirrors at 46 deg, 60 frames), rendered at stop 40 and tuned on by
 # nothing; askew720 (1280x720, 240 dots of 2.4 mm, a rig set up by hand: mirrors at 38 and 50 deg, tilted 10 deg
 # up and 6 deg down, the head 15 mm off the rig's axis and turned 10 deg towards one mirror), rendered at stop 45 and
-# tuned on by nothing. About 115 minutes.
+# tuned on by nothing; hq1 (1024x576, 210 dots of 2.6 mm, mirrors at 43 and 49 deg, the head 8 mm off the axis,
+# expressions twice as fast), held out at stop 51, then the clip stop 52's follow-on was found on; hr2 (1152x648, 230
+# dots of 2.5 mm, mirrors at 41 and 46 deg, the head 6 mm off the axis and turned 5 deg, the mirror images touching
+# the face), rendered after stop 52's change and tuned on by nothing. About 122 minutes.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -144,6 +147,12 @@ stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/askew720 --size 1280 720 --focal 1100 \
 		--distance 630 --mirror-deg 38 50 --mirror-tilt 10 -6 --head-offset 15 -8 --head-turn 3 10 2 --markers 240 \
 		--marker-mm 2.4 --head-deg 9 12 5 --tempo 2.0 --frames 90 --samples 4 --seed 441 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/hq1 --size 1024 576 --focal 930 --distance 610 \
+		--mirror-deg 43 49 --markers 210 --marker-mm 2.6 --head-deg 10 14 5 --head-offset 8 -5 --tempo 2.0 \
+		--frames 75 --samples 4 --seed 5151 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/hr2 --size 1152 648 --focal 1050 --distance 630 \
+		--mirror-deg 41 46 --markers 230 --marker-mm 2.5 --head-deg 8 16 4 --head-offset -6 4 --head-turn 0 5 0 \
+		--tempo 2.2 --frames 90 --samples 4 --seed 7373 --no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
 # (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps; and hd, held out (1920x1080,

@@ -551,7 +551,7 @@ def test_a_marker_hidden_behind_a_hand_comes_back_as_itself(tmp_path, capsys):
     assert abs(ratio_error) < 0.002
 
 
-@pytest.mark.parametrize("name, reported", [("close", 0.96), ("jaw", 0.985)])
+@pytest.mark.parametrize("name, reported", [("close", 0.96), ("jaw", 0.995)])
 def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path, capsys, name, reported):
     """#18, two held-out clips: close (a face 480 mm from a wide lens, mirrors at 55 deg) and jaw
     (expressions 2.5 times as fast, 30 frames/s), where chin and lip dots move 3.5-4.6 mm in a frame,
@@ -570,12 +570,44 @@ def test_a_dot_moving_faster_than_the_gate_is_followed_on_its_2d_tracks(tmp_path
     now stays when its dot is followed into a later label of it and its points lie on that label's
     path (``core.track.late.settle_lost_markers``): 96.1 %. Stop 35: a fast dot's gap bracketed by its 2D
     tracks is measured (``bridge.bridge_gaps_along_2d_tracks``): jaw 96.5 -> 97.0 %; with the clip's 2D tracks
-    linked within 0.8 of the blob spacing (``pairing.clip_link_gate_px``) its two chin dots hold: 99.0 %."""
+    linked within 0.8 of the blob spacing (``pairing.clip_link_gate_px``) its two chin dots hold: 99.0 %.
+    Stop 52: a marker's last measurement followed on along all its 2D tracks (``bridge``): jaw 99.9 %."""
     s, report, ratio_error = _tracked_stress_clip(name, tmp_path, capsys)
     assert s["identity_switches"] == 0 and s["split_markers"] == 0 and s["markers_matched"] == s["markers_tracked"]
     assert s["seen_reported_fraction"] > reported
     assert s["rms_mm"] < 0.25 and s["max_mm"] < 3.5
     assert abs(ratio_error) < 0.002
+
+
+def test_a_dot_the_final_pass_lost_at_a_fast_peak_is_followed_on(tmp_path, capsys):
+    """#18, stop 52, hq1 (held out at stop 51: 1024x576, 210 dots of 2.6 mm, mirrors at 43 and 49 deg, the head
+    8 mm off the axis, expressions twice as fast): a dot by the nose, seen directly and in mirror 1 in all 75
+    frames, rose 10 mm and fell back in 5 frames; the final pass lost it at the peak, its conjecture stayed 5-11 mm
+    off for the rest of the take, and the marker went with its 14 measured frames: 96.6 % of the seen
+    marker-frames reported. After a marker's last measurement, the candidates on its direct track and on all the
+    mirror tracks it was measured on, one a frame, are now its own (``bridge.bridge_gaps_along_2d_tracks``):
+    99.0 %, no switch, no split, 9 points over 2 mm as before."""
+    s, report, ratio_error = _tracked_stress_clip("hq1", tmp_path, capsys)
+    assert s["identity_switches"] == 0 and s["split_markers"] == 0
+    assert s["seen_reported_fraction"] > 0.985
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 10 and s["rms_mm"] < 0.25
+    assert sum(report["per_frame"]["bridged"]) > 0
+
+
+def test_a_label_off_the_face_on_another_labels_mirror_track_is_undone(tmp_path, capsys):
+    """#18, stop 52, hr2 (rendered after stop 52's follow-on, the mirror images touching the face): two forehead dots
+    seen only directly paired with like dots' grazing mirror-1 images from the first frames; the images' own dots
+    took them in other frames. Of two labels on one mirror track, the one off the face while the other lies on it
+    is now undone there (``onface.off_face_on_shared_tracks``): one of the two (22 mm off the face) goes, and with
+    it the split label and 36 points over 2 mm (91 -> 63 identity switches). The other, 5 mm off the face along a
+    grazing ray, stays: the README's lead."""
+    s, report, _ = _tracked_stress_clip("hr2", tmp_path, capsys)
+    assert s["split_markers"] == 0 and s["identity_switches"] <= 63
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 63
+    assert report["per_frame"]["released_blobs"][0] >= 28
+    assert s["seen_reported_fraction"] > 0.98
 
 
 @pytest.mark.parametrize("name, reported, over_2mm, switches", [("fast540", 0.97, 5, 0), ("lip648", 0.985, 2, 0)])

@@ -283,6 +283,40 @@ def _labelled_take(measured, neutral, candidate):
                        head_frame=points.copy(), candidate=np.where(measured, candidate, -1), rigid=np.arange(N))
 
 
+def test_of_two_labels_on_one_mirror_track_the_one_off_the_face_is_undone():
+    """#18, stop 52, hr2: a forehead dot seen only directly paired, from the first frames, with a like dot's grazing
+    image on its line (22 mm off the face along its ray), and the image's own dot took the image in other frames
+    (on the face): the first label's frames on that mirror track are undone. Both labels on the face (a track that
+    passes from one dot to another), or both off it, stay; so do frames on other tracks."""
+    from mirrorcap.core.track.onface import off_face_on_shared_tracks
+
+    F, N = 10, 26
+    g = np.stack(np.meshgrid(np.arange(-2, 3), np.arange(-2, 3)), -1).reshape(-1, 2) * 10.0
+    face = np.c_[g, 600.0 + 0.002 * (g ** 2).sum(axis=1)]                 # 25 markers on a gently curved face
+    ray = face[12] / np.linalg.norm(face[12])
+
+    def case(off_a, off_b):
+        neutral = np.vstack([face, face[12]])
+        measured = np.ones((F, N), bool)
+        measured[5:, 12] = False                                          # label 12: frames 0-4, label 25: 5-9
+        measured[:5, 25] = False
+        candidate = np.arange(F * N).reshape(F, N)
+        take = _labelled_take(measured, neutral, candidate)
+        take.points[:5, 12] += off_a * ray
+        take.points[5:, 25] += off_b * ray
+        mirror_track = np.full((F * N, 2), -1)
+        mirror_track[:, 0] = np.tile(np.arange(N), F)                     # each label on its own mirror-0 track ...
+        mirror_track[candidate[:, 25], 0] = 12                            # ... but 12 and 25 on one
+        mirror_track[candidate[:2, 12], 0] = 40                           # frames 0-1: label 12 on another track
+        return off_face_on_shared_tracks(take, mirror_track, 10.0)
+
+    drop = case(22.0, 0.0)
+    assert drop[2:5, 12].all() and drop.sum() == 3                        # not frames 0-1 (another track)
+    drop = case(0.0, -22.0)
+    assert drop[5:, 25].all() and drop.sum() == 5
+    assert not case(0.0, 0.0).any() and not case(22.0, 22.0).any() and not case(6.0, 0.0).any()
+
+
 def test_labels_on_one_pair_of_2d_tracks_are_one_marker():
     """#18, the jaw clip: a chin dot moving 4-8 mm a frame along the line of sight was measured by
     turns under two labels while the direct view's and a mirror's 2D tracks followed it throughout.
@@ -422,8 +456,9 @@ def test_a_dot_at_the_silhouette_is_on_the_face_as_the_mirror_sees_it():
     assert off_in_mirrors(face, np.ones(len(face), int), dot, used, planes, 10.0)
 
 
-def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held_frame=None):
-    """A marker measured in frames 0-2 and 7-9 of 10 on a patch of 25 markers 600 mm away; in every
+def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held_frame=None,
+                 measured_frames=(0, 1, 2, 7, 8, 9)):
+    """A marker measured in frames 0-2 and 7-9 (``measured_frames``) of 10 on a patch of 25 markers 600 mm away; in every
     frame slot 0 is its candidate (direct track 5; mirror-0 track 7 to frame 4, then 8: that track
     breaks), slot 1 another dot's (direct track 6, mirror track 7), slot 2 its direct blob with a
     stray mirror blob (mirror track 9). Returns the take after :func:`bridge.bridge_gaps_along_2d_tracks`."""
@@ -452,7 +487,7 @@ def _bridge_case(step_mm=3.0, facing=(-1.0, 0.0, -1.0), missing_frame=None, held
     dtrack = np.where(slot == 1, 6, 5)[keep]
     mtrack = np.c_[np.where(slot == 0, np.where(frame <= 4, 7, 8), np.where(slot == 1, 7, 9)), np.full(F * S, -1)][keep]
     measured = np.zeros((F, 25), bool)
-    measured[[0, 1, 2, 7, 8, 9], m] = True
+    measured[list(measured_frames), m] = True
     index = cands.start[:-1]                                   # each frame's slot-0 candidate (first of it)
     candidate = np.zeros((F, 25), int)
     candidate[:, m] = index
@@ -490,6 +525,25 @@ def test_a_fast_dots_gap_is_bridged_where_its_2d_tracks_bracket_it():
                  {"facing": (-1.0, 0.0, -0.16)}):
         take, path, m = _bridge_case(**case)
         assert not (take.assigned_blob[3:7, m] >= 0).any() and take.stats["bridged"].sum() == 0, case
+
+
+def test_a_dot_lost_for_good_is_followed_on_along_all_its_2d_tracks():
+    """#18, stop 52, hq1: a dot by the nose rising 10 mm and falling back in 5 frames was lost at its peak
+    (the prediction overshot by a frame's motion) and its conjecture stayed 5-11 mm off the dot, beyond the
+    gate, for the take's last 60 frames, though its direct and mirror 2D tracks ran on. After a marker's last
+    measurement, the candidates on its direct track *and* on the mirror tracks it was measured on (only one end
+    vouches) are its own while there is one a frame: followed to frame 4, where the mirror track breaks (not
+    onto the stray mirror blob on the direct track, nor the other dot on the mirror track). Not followed: a
+    blob another marker measures, a slow dot, a dot a view sees at a grazing angle, a chain shorter than two
+    frames (its dot missed in frame 4)."""
+    take, path, m = _bridge_case(measured_frames=(0, 1, 2))
+    assert take.stats["bridged"].tolist() == [0, 0, 0, 1, 1, 0, 0, 0, 0, 0]
+    assert np.allclose(take.points[[3, 4], m], path[[3, 4]]) and not take.conjectured[[3, 4], m].any()
+    assert (take.camera_mask[[3, 4], m] == 3).all() and (take.assigned_blob[5:, m] < 0).all()
+    for case in ({"held_frame": 4}, {"step_mm": 0.3}, {"facing": (0.0, 0.0, -1.0)}, {"facing": (-1.0, 0.0, -0.16)},
+                 {"missing_frame": 4}):
+        take, path, m = _bridge_case(measured_frames=(0, 1, 2), **case)
+        assert take.stats["bridged"].sum() == 0, case
 
 
 def test_a_view_sees_a_dot_face_on_within_the_angle_of_its_surface_normal():

@@ -1,4 +1,5 @@
-"""A fast dot's gap measured where its 2D tracks bracket it (:func:`bridge_gaps_along_2d_tracks`), with
+"""A fast dot's gap measured where its 2D tracks bracket it, and its dot followed on along all its 2D tracks
+after its last measurement (:func:`bridge_gaps_along_2d_tracks`), with
 the face's surface normals at its markers (:func:`..geometry.surface.surface_normals`) to refuse a view that
 sees the dot at a grazing angle."""
 
@@ -45,8 +46,13 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
     against the direction to the camera or the mirror's virtual camera, the camera centre reflected in
     the plane, eq. 3.9; the camera's own grazing view let a chin dot's bridge take a merged image,
     vga480). ``det``: the clip's detections (:class:`.ClipDetections`); ``planes``: the mirrors'
-    ``(normals (K, 3), ds (K,))``. In place; ``stats["bridged"]`` counts the
-    cells per frame."""
+    ``(normals (K, 3), ds (K,))``.
+
+    After a marker's last measurement ``a`` before the take's end, where only that end vouches, the frames
+    from ``a + 1`` take the candidates on the marker's direct track at ``a`` *and* on every mirror track it was
+    measured on there (a mirror that loses the dot may drop out, none may join), unclaimed, while each frame
+    has one such candidate -- :data:`BRIDGE_MIN_FRAMES` or more, under the same step and face-on tests.
+    In place; ``stats["bridged"]`` counts the cells per frame."""
     cand = result.candidate
     F, N = result.assigned_blob.shape
     result.stats["bridged"] = np.zeros(F, int)
@@ -70,6 +76,31 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
     surface = surface_normals(result.neutral)
     normals, ds = np.asarray(planes[0], float), np.asarray(planes[1], float)
     centres = np.vstack([np.zeros(3), reflect_points(np.zeros_like(normals), normals, ds)])   # camera, virtual ones
+
+    def bridge(m, a, block, end):
+        """Marker ``m``'s frames after its measurement ``a`` up to ``end`` (its next measurement; None: the chain's
+        last frame) measured at the candidates ``block``, one a frame, if the tests pass."""
+        if holds(block).any():
+            return                                     # bridged into another marker's gap already
+        f = cands.frame[block]
+        heads = to_head_frame(R[f], result.head_pose[f, 3:], cands.points[block])
+        path = np.vstack([result.head_frame[a, m], heads] + ([] if end is None else [result.head_frame[end, m]]))
+        if np.linalg.norm(np.diff(path, axis=0), axis=1).max() < BRIDGE_STEP_MM:
+            return
+        normal = np.einsum("fij,j->fi", R[f], surface[m])
+        seen = np.c_[np.ones(block.size, bool), cands.mirror_blob[block] >= 0]       # (n, 1 + K): the views used
+        if not np.all(seen_face_on(normal, cands.points[block], centres, BRIDGE_GRAZING_DEG) | ~seen):
+            return
+        for h, key in zip(held, keys):
+            h[key[block][key[block] >= 0]] = True                           # now this marker's
+        result.candidate[f, m] = block
+        result.points[f, m] = cands.points[block]
+        result.head_frame[f, m] = heads
+        result.conjectured[f, m] = False
+        result.camera_mask[f, m] = camera_mask_of(cands.mirror_blob[block])
+        result.assigned_blob[f, m] = cands.direct[block] - det.start[0][f]
+        result.stats["bridged"][f] += 1
+
     # every gap of BRIDGE_MIN_FRAMES or more between two measurements, in one pass: (marker, a, b)
     m_all, f_all = np.nonzero(measured.T)                  # by marker, then frame
     after = np.flatnonzero((m_all[1:] == m_all[:-1]) & (np.diff(f_all) > BRIDGE_MIN_FRAMES))
@@ -88,23 +119,28 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
         f = cands.frame[block]                          # sorted: one per frame when every step is one frame
         if block.size != b - a - 1 or (block.size > 1 and (np.diff(f) != 1).any()):
             continue                                   # a frame with none, or with two
-        if holds(block).any():
-            continue                                   # bridged into another marker's gap already
-        heads = to_head_frame(R[f], result.head_pose[f, 3:], cands.points[block])
-        path = np.vstack([result.head_frame[a, m], heads, result.head_frame[b, m]])
-        if np.linalg.norm(np.diff(path, axis=0), axis=1).max() < BRIDGE_STEP_MM:
+        bridge(m, a, block, b)
+    # a marker's last measurement before the take's end, its dot's direct track and the mirror tracks it was
+    # measured on running on (only one end vouches, so all of them): followed on while every frame has one such
+    # candidate. A fast expression's peak can outrun the pass's gate and leave the conjecture far off the dot for
+    # good (hq1: a dot by the nose, 10 mm up and back in 5 frames, lost at its peak with 61 frames to go)
+    last = F - 1 - np.argmax(measured[::-1], axis=0)
+    open_m = np.flatnonzero(measured.any(axis=0) & (last < F - 1))
+    by_track = np.argsort(direct_track, kind="stable")          # candidates by direct track, then index (frame)
+    sorted_tracks = direct_track[by_track]
+    for m in open_m:
+        a = last[m]
+        da, ma = direct_track[cand[a, m]], mirror_track[cand[a, m]]
+        if da < 0 or not (ma >= 0).any():
             continue
-        normal = np.einsum("fij,j->fi", R[f], surface[m])
-        seen = np.c_[np.ones(block.size, bool), cands.mirror_blob[block] >= 0]       # (n, 1 + K): the views used
-        if not np.all(seen_face_on(normal, cands.points[block], centres, BRIDGE_GRAZING_DEG) | ~seen):
-            continue
-        for h, key in zip(held, keys):
-            h[key[block][key[block] >= 0]] = True                           # now this marker's
-        result.candidate[f, m] = block
-        result.points[f, m] = cands.points[block]
-        result.head_frame[f, m] = heads
-        result.conjectured[f, m] = False
-        result.camera_mask[f, m] = camera_mask_of(cands.mirror_blob[block])
-        result.assigned_blob[f, m] = cands.direct[block] - det.start[0][f]
-        result.stats["bridged"][f] += 1
+        block = by_track[np.searchsorted(sorted_tracks, da, "left"):np.searchsorted(sorted_tracks, da, "right")]
+        block = block[block >= cands.start[a + 1]]
+        mt = mirror_track[block]
+        block = block[~claimed[block] & ((mt == ma) | ((mt < 0) & (ma >= 0))).all(axis=1)
+                      & ((mt == ma) & (ma >= 0)).any(axis=1)]
+        f = cands.frame[block]
+        run = np.r_[f[:1] == a + 1, np.diff(f) == 1] if f.size else np.zeros(0, bool)
+        n = int(np.argmin(run)) if not run.all() else run.size      # the chain from a + 1, one candidate a frame
+        if n >= BRIDGE_MIN_FRAMES:
+            bridge(m, a, block[:n], None)
     return result

@@ -14,7 +14,7 @@ from ..geometry.rigid import rotation_zyx, to_head_frame
 from ..capture.views import ClipDetections, frame_spaced
 from .candidates import ClipCandidates
 from .motion import RELATION_CORRELATION, conjecture_gaps, neighbours
-from .onface import along_ray, beyond, face_offset, off_in_mirrors, off_the_face
+from .onface import along_ray, beyond, face_offset, off_face_on_shared_tracks, off_in_mirrors, off_the_face
 from .pairing import candidate_tracks, chain_pairing_support
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, keep_measured
 
@@ -552,7 +552,8 @@ def release_other_markers_blobs(result: TrackResult, det: ClipDetections, cands:
     frame wherever the dot's own marker is measured without that mirror (wide576, 17 frames). The
     track condition spares a marker whose image merely falls where another marker, hidden in the
     mirror, would be imaged (on a dense face one mirror blob in seven lies within a pixel of such a
-    point)."""
+    point). Also undone: of two labels on one mirror track, the one off the face while the other lies on it
+    (:func:`.onface.off_face_on_shared_tracks`: the image's own dot, seen in no other mirror, took it too)."""
     from scipy.spatial import cKDTree
 
     from ..geometry.mirror import reflect_points
@@ -590,5 +591,6 @@ def release_other_markers_blobs(result: TrackResult, det: ClipDetections, cands:
         pairing = a.astype(np.int64) * n_tracks + track
         wrong = np.isin(pairing, pairing[drop[f, a]])
         drop[f[wrong], a[wrong]] = True
+    drop |= off_face_on_shared_tracks(result, mirror_track, OFF_FACE_MM)     # the image's own dot took it too
     result.stats["released_blobs"] = np.array([int(drop.sum())])
     return drop_measurements(result, drop)

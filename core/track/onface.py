@@ -64,3 +64,35 @@ def off_in_mirrors(markers, views, point, used, planes, off_mm: float) -> bool:
                                                           FACE_MARKERS):
             return False
     return True
+
+
+def off_face_on_shared_tracks(result, mirror_track, off_mm: float) -> np.ndarray:
+    """Measurements ``(F, N)`` to undo: of two labels measured on one 2D track of a mirror (``mirror_track``
+    ``(C, K)`` per candidate, :func:`.pairing.candidate_tracks`), in frames of their own, the one whose points lie
+    off the face (:func:`face_offset` against the frame's other measured markers, median over its frames on the
+    track, :func:`beyond` ``off_mm``) while another's lie on it -- its frames on that track. A dot seen only
+    directly pairs with a like dot's grazing image on its line from the first frames, and the image's own dot
+    takes its image where it can (hr2: two forehead dots 17-19 mm off along the ray for 63 and 36 frames; their
+    points 10.5 and 22.3 mm off the face, the owners' 3.4 and 1.1 mm). Two markers that merely share a track at
+    different times both lie on the face and stay."""
+    F, N = result.assigned_blob.shape
+    drop = np.zeros((F, N), bool)
+    measured = (result.assigned_blob >= 0) & (result.candidate >= 0) & np.isfinite(result.points[..., 0])
+    cand = np.maximum(result.candidate, 0)
+    for k in range(mirror_track.shape[1]):
+        frame, label = np.nonzero(measured & (mirror_track[cand, k] >= 0))
+        track = mirror_track[cand[frame, label], k]
+        pair = np.unique(np.c_[track, label], axis=0)                        # (track, label) in use
+        shared = np.unique(pair[:, 0], return_counts=True)
+        for x in shared[0][shared[1] > 1]:
+            labels = pair[pair[:, 0] == x, 1]
+            off = np.zeros(labels.size, bool)
+            for i, lab in enumerate(labels):
+                frames = frame[(track == x) & (label == lab)]
+                offsets = np.array([face_offset(result.points[f, measured[f] & (np.arange(N) != lab)],
+                                                result.points[f, lab]) for f in frames])
+                off[i] = beyond(tuple(np.nanmedian(offsets, axis=0)), off_mm)
+            if off.any() and not off.all():
+                for lab in labels[off]:
+                    drop[frame[(track == x) & (label == lab)], lab] = True
+    return drop

@@ -24,8 +24,9 @@ Steps, per the procedure:
    (:func:`.pairing.back_on_mirror_track`); conflicts (one 2D blob claimed twice) keep the marker closest to its
    prediction;
 7. missing markers conjectured from their neighbours (eq. 5.8); after the pass, with the
-   whole take known, a gap that the marker's 2D tracks bracket is measured from its candidates
-   (:func:`.bridge.bridge_gaps_along_2d_tracks`), dots are followed into the other gaps
+   whole take known, a gap that the marker's 2D tracks bracket is measured from its candidates, and a marker
+   lost for good is followed on along all its 2D tracks (:func:`.bridge.bridge_gaps_along_2d_tracks`), dots are
+   followed into the other gaps
    (``core.track.singleview``), and the rest conjectured from relations to their neighbours learned over the take
    (``core.track.motion.learned_conjectures``), meeting the measurements at both ends of a gap;
 8. the Kalman filters give the reported positions.
