@@ -243,6 +243,10 @@ def test_take_operators_stabilize_and_marker_map(tmp_path):
     assert out["retarget"] == ["FINISHED"] and out["retarget_keyed"] == 52
     assert out["retarget_jaw_max"] > 0.05 and out["csv_rows"] == 21
     assert out["retarget_self"][0] == "ERROR"
+    # a stretch (take frames 5-11) in a scene starting at 1001: the whole take's weights at those frames
+    assert out["retarget_stretch"] == ["FINISHED"] and out["stretch_jaw_frames"] == list(range(1001, 1008))
+    assert out["stretch_jaw_off"] < 1e-6 and out["stretch_csv_rows"] == 8
+    assert out["retarget_bad_stretch"][0] == "ERROR" and "15:40" in out["retarget_bad_stretch"][1]
     assert out["export_faps"] == ["FINISHED"] and out["fap_lines"] == 1 + 2 * 20
     assert out["play_fap"] == ["FINISHED"] and out["play_fap_keys"] == 1 + 52 + 20
     assert out["play_bad"][0] == "ERROR" and "68 bits" in out["play_bad"][1] and out["play_bad_unchanged"]
@@ -256,3 +260,6 @@ def test_take_operators_stabilize_and_marker_map(tmp_path):
     assert out["transfer_cancel"] == ["CANCELLED"] and out["transfer_cancel_unchanged"]
     assert out["transfer"] == ["FINISHED"] and out["transfer_keys"] == 1 + 20
     assert out["transfer_moved_mm"] > 0.5
+    # the stretch keyed from 1001: the evaluated mesh as the whole take's at the same take frames
+    assert out["transfer_stretch"] == ["FINISHED"] and out["transfer_stretch_keys"] == 1 + 7
+    assert out["transfer_stretch_off_mm"] < 1e-3

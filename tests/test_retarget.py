@@ -274,6 +274,10 @@ def test_retarget_a_stretch_of_a_take_at_a_pipelines_start_frame(tmp_path, head_
         seen[name] = np.load(tmp_path / f"{name}.npz")
     report = json.loads((tmp_path / "part.json").read_text())
     assert report["frames"] == 18 and report["take_frames"] == [12, 30] and report["frame_start"] == 1001
+    # the fit's residuals are the keyed frames' (the whole take solved, the report of what was keyed)
+    residual = json.loads((tmp_path / "whole.json").read_text())["residual_mm"]["per_frame"][12:30]
+    assert report["residual_mm"]["per_frame"] == residual and len(residual) == 18
+    assert report["residual_mm"]["max"] == pytest.approx(max(residual), abs=1e-4)
     assert list(seen["part"]["frames"]) == list(range(1001, 1019)) and list(seen["whole"]["frames"]) == list(range(1, 41))
     whole, part = seen["whole"]["evaluated"][12:30], seen["part"]["evaluated"]
     assert np.abs(whole - whole[:1]).max() > 2e-3                 # the stretch moves (metres)

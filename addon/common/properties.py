@@ -76,7 +76,8 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     head_motion: BoolProperty(name="Head Motion", default=False, description="key the head motion on the object")
     blinks: BoolProperty(name="Blinks", default=True, description="synthetic eyelid blinks (no eyelid markers)")
     bake_take_start: IntProperty(name="From", default=0, min=0,
-                                 description="first take frame to bake (0-based; the whole take is bound)")
+                                 description="first take frame to key, by Bake and Retarget (0-based; the whole take "
+                                             "is bound)")
     bake_take_end: IntProperty(name="To", default=0, min=0, description="take frame to stop before (0: the take's end)")
     stable_take: StringProperty(name="Stabilised Take", subtype="FILE_PATH", default="//take_stable.c3d",
                                 description="OUT.c3d that Stabilize writes (the take in the head frame of its first frame)")

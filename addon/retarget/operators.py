@@ -36,6 +36,10 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
     csv: StringProperty(name="Live Link CSV", subtype="FILE_PATH", description="LIVELINK.csv to write (optional)")
     neutral_frame: IntProperty(name="Neutral Frame", default=0, min=0)
     smoothness: FloatProperty(name="Smoothness", default=8.0, min=0.0, description="temporal smoothness lambda, mm^2")
+    take_start: IntProperty(name="From Take Frame", default=0, min=0,
+                            description="first take frame to key (0-based; the whole take is bound and solved)")
+    take_end: IntProperty(name="To Take Frame", default=0, min=0,
+                          description="take frame to stop before (0: the take's end)")
 
     def prepare(self, context):
         from ...core.take.c3d import read_c3d
@@ -57,6 +61,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         if csv is not None and not csv.parent.is_dir():
             raise InputError(f"the CSV's folder {csv.parent} does not exist (save the .blend first for // paths)")
         data = read_c3d(required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)"))
+        frames = self._stretch(data)
         head = read_head(actor)
         head.validate()
         keys = read_shape_keys(actor)
@@ -72,9 +77,15 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
                                              neutral_frame=self.neutral_frame, marker_map=mapping,
                                              unseen="conjecture", smoothness=self.smoothness)
             progress(0.95, "keying")
-            return solve, angles
+            return solve.frames(*frames), angles[frames[0]:frames[1]]   # the stretch keyed
 
         return work
+
+    def _stretch(self, data) -> tuple:
+        """The take frames ``(START, END)`` to key: From/To, checked against the take."""
+        from ...core.face.animate import take_frame_range
+
+        return take_frame_range((self.take_start, self.take_end or None), data["points"].shape[0])
 
     def _prepare_transfer(self, context, s, actor, target):
         from ...core.retarget.transfer import check_landmarks
@@ -83,6 +94,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         from ..common.shape_keys import check_keying
 
         data = read_c3d(required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)"))
+        frames = self._stretch(data)
         head = read_head(actor)
         head.validate()
         keys = read_shape_keys(actor)
@@ -91,14 +103,14 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         mapping = scene_marker_map(context)
         self._target, self._rate = target.name, data["rate"]
         self._mode, self._modes = (s.bake_mode if self.mode == "SCENE" else self.mode), s.modes
-        check_keying(self._mode, self._modes, len(data["points"]), modes_option="Modes")
+        check_keying(self._mode, self._modes, frames[1] - frames[0], modes_option="Modes")
 
         def work(progress):
             from ...core.retarget.transfer import transfer_take
 
             tr = transfer_take(head, keys, character, data["labels"], data["points"], data["rate"],
                                neutral_frame=self.neutral_frame, marker_map=mapping, unseen="conjecture",
-                               progress=lambda f, text: progress(0.9 * f, text))
+                               progress=lambda f, text: progress(0.9 * f, text), frames=frames)
             progress(0.95, "keying")
             return character, tr
 

@@ -33,7 +33,12 @@ class MIRRORCAP_PT_retarget(SidebarPanel, bpy.types.Panel):
                 row.prop(s, "modes")
         else:
             col.prop(s, "livelink_csv")
-        col.operator("mirrorcap.retarget", icon="ARMATURE_DATA")
+        row = col.row(align=True)
+        row.prop(s, "bake_take_start")
+        row.prop(s, "bake_take_end")
+        op = col.operator("mirrorcap.retarget", icon="ARMATURE_DATA")
+        op.take_start, op.take_end = s.bake_take_start, s.bake_take_end
+        col.label(text=f"keys from the scene's start frame, {context.scene.frame_start}")
         col.label(text="Esc cancels", icon="INFO")
         col.separator()
         col.label(text="MPEG-4 facial animation parameters")

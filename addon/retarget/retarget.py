@@ -190,11 +190,11 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     binding, solve, angles = retarget_take(head, shape_keys, data["labels"], data["points"],
                                            neutral_frame=neutral_frame, head_pose=pose, marker_map=mapping,
                                            unseen=unseen, smoothness=smoothness)
-    weights, angles = solve.weights[start:end], angles[start:end]
+    solve, angles = solve.frames(start, end), angles[start:end]       # the keyed stretch's weights and residuals
     t2 = time.perf_counter()
     open_blend(target_blend)
     target = find_target_object(target_object)
-    keyed = key_weights(target, solve.names, weights, frame_start)
+    keyed = key_weights(target, solve.names, solve.weights, frame_start)
     set_scene_rate(bpy.context.scene, data["rate"])
     result = {"take": str(take), "head": str(head_blend), "actor_object": actor_name, "target": str(target_blend),
               "target_object": target.name, "output": str(output), "method": method, "frames": end - start,
@@ -206,7 +206,7 @@ def run_retarget(take, head_blend, target_blend, output, target_object=None, met
     save_blend_atomically(output)
     files = {}
     if csv is not None:
-        files[Path(csv)] = livelink_csv(weights, solve.names, data["rate"], head=angles)
+        files[Path(csv)] = livelink_csv(solve.weights, solve.names, data["rate"], head=angles)
     result["timings_s"]["total_s"] = time.perf_counter() - t0
     if report is not None:
         files[Path(report)] = json.dumps(result, indent=1) + "\n"

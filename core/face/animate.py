@@ -173,5 +173,5 @@ def take_frame_range(frames, n_frames: int) -> tuple[int, int]:
     start, end = (0, None) if frames is None else frames
     end = n_frames if end is None else int(end)
     if not 0 <= start < end <= n_frames:
-        raise InputError(f"--frames {start}:{end} is not a stretch of the take's {n_frames} frames (0:{n_frames})")
+        raise InputError(f"frames {start}:{end} is not a stretch of the take's {n_frames} frames (0:{n_frames})")
     return int(start), end

@@ -20,7 +20,7 @@ in/out and up/down) keep only their difference, and ``mouthClose <= jawOpen``.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -53,6 +53,11 @@ class ArkitSolve:
     residual_mm: np.ndarray       # (F,) RMS marker residual of the fit
     unobservable: list = field(default_factory=list)
     iterations: int = 0
+
+    def frames(self, start: int, end: int) -> "ArkitSolve":
+        """The solve of the take frames ``start:end`` only (a stretch keyed; the whole take was solved): its
+        weights, residuals and report."""
+        return replace(self, weights=self.weights[start:end], residual_mm=self.residual_mm[start:end])
 
     def report(self) -> dict:
         active = self.weights > 0.05

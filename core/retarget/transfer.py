@@ -369,7 +369,7 @@ def actor_motion(head: HeadModel, shape_keys: dict | None, binding: Binding, rat
     start, end = (0, n_take) if frames is None else frames
     F = end - start
     prior = np.zeros((F, len(head.vertices), 3))
-    parts = {"weights": None, "names": [], "prior_residual_mm": None}
+    parts = {"weights": None, "names": [], "prior_solve": None}
     arkit = {}
     if shape_keys:
         try:
@@ -381,9 +381,9 @@ def actor_motion(head: HeadModel, shape_keys: dict | None, binding: Binding, rat
         solve = solve_weights(arkit["basis"], binding.displacements, arkit["names"])
         by_lower = {k.lower(): k for k in shape_keys}
         S = np.stack([np.asarray(shape_keys[by_lower[n.lower()]], float) for n in solve.names])   # (K, Va, 3)
-        weights = solve.weights[start:end]
-        prior = (weights @ S.reshape(len(S), -1)).reshape(F, -1, 3)                    # one BLAS product
-        parts.update(weights=weights, names=solve.names, prior_residual_mm=solve.residual_mm[start:end])
+        solve = solve.frames(start, end)                                               # the stretch's
+        prior = (solve.weights @ S.reshape(len(S), -1)).reshape(F, -1, 3)              # one BLAS product
+        parts.update(weights=solve.weights, names=solve.names, prior_solve=solve)
         if any(n.lower().startswith("eyeblink") for n in solve.names):
             settings = replace(settings, blinks=False)        # the prior closes the lids as the actor's do
     rig = FaceRig(head, binding.vertices, settings)
@@ -440,10 +440,8 @@ class Transfer:
                            "landmark_rms_mm": self.binding.landmark_rms_mm},
                "lids": "actor's eyeBlink weights" if w is not None and any(
                    n.lower().startswith("eyeblink") for n in self.parts["names"]) else "random blinks (face rig)"}
-        if self.parts.get("prior_residual_mm") is not None:
-            r = self.parts["prior_residual_mm"]
-            out["residual_mm"] = {"rms": float(np.sqrt(np.mean(r ** 2))), "max": float(r.max()),
-                                  "per_frame": np.round(r, 4).tolist()}
+        if self.parts.get("prior_solve") is not None:
+            out["residual_mm"] = self.parts["prior_solve"].report()["residual_mm"]
         return out
 
 

@@ -115,6 +115,17 @@ out["retarget_keyed"] = len(curves)
 jaw = [fc for fc in curves if "jawOpen" in fc.data_path][0]
 out["retarget_jaw_max"] = max(k.co[1] for k in jaw.keyframe_points)
 out["csv_rows"] = len((work / "live.csv").read_text().splitlines())
+# ... a stretch of it (take frames 5-11) in a scene starting at 1001: the whole take's weights at those frames
+whole_jaw = {int(k.co[0]) - scene.frame_start: k.co[1] for k in jaw.keyframe_points}     # take frame: weight
+first_frame = scene.frame_start
+scene.frame_start = 1001
+out["retarget_stretch"] = call(bpy.ops.mirrorcap.retarget, take_start=5, take_end=12)
+jaw = [fc for fc in fcurves(character.data.shape_keys.animation_data.action) if "jawOpen" in fc.data_path][0]
+out["stretch_jaw_frames"] = [int(k.co[0]) for k in jaw.keyframe_points]
+out["stretch_jaw_off"] = max(abs(k.co[1] - whole_jaw[int(k.co[0]) - 1001 + 5]) for k in jaw.keyframe_points)
+out["stretch_csv_rows"] = len((work / "live.csv").read_text().splitlines())
+out["retarget_bad_stretch"] = call(bpy.ops.mirrorcap.retarget, take_start=15, take_end=40)
+scene.frame_start = first_frame
 
 # 6. MPEG-4 FAPs: Export FAPs writes the take's FAPs; Play FAP File bakes them back onto the head
 s.take = str(work / "sparse.c3d")
@@ -175,4 +186,22 @@ for f in (5, 12):
     plain.data.shape_keys.reference_key.points.foreach_get("co", rest)
     moved = max(moved, float(np.abs(co - rest).max()) * 1000)
 out["transfer_moved_mm"] = moved
+# ... a stretch (take frames 5-11) keyed from 1001: the evaluated mesh as the whole take's at those take frames
+whole = {}
+for f in (5, 9):
+    scene.frame_set(first_frame + f)
+    ev = plain.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    whole[f] = np.empty(3 * len(plain.data.vertices), np.float32)
+    ev.data.vertices.foreach_get("co", whole[f])
+scene.frame_start = 1001
+out["transfer_stretch"] = call(bpy.ops.mirrorcap.retarget, take_start=5, take_end=12)
+out["transfer_stretch_keys"] = len(plain.data.shape_keys.key_blocks)
+off = 0.0
+for f in (5, 9):
+    scene.frame_set(1001 + f - 5)
+    ev = plain.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    co = np.empty(3 * len(plain.data.vertices), np.float32)
+    ev.data.vertices.foreach_get("co", co)
+    off = max(off, float(np.abs(co - whole[f]).max()) * 1000)
+out["transfer_stretch_off_mm"] = off
 print("RESULT " + json.dumps(out))
