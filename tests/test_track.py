@@ -546,6 +546,44 @@ def test_a_dot_lost_for_good_is_followed_on_along_all_its_2d_tracks():
         assert take.stats["bridged"].sum() == 0, case
 
 
+def test_a_dot_seen_in_both_mirrors_is_followed_on_by_its_fused_candidate():
+    """Stop 52: a dot measured through both mirrors has three candidates a frame on its tracks -- the fused one
+    and one through each mirror alone. The follow-on takes the one sharing the most of its tracks: the fused
+    candidate while both mirror tracks run (frames 3-4), then, mirror 0's track broken, the one through mirror 1
+    (frames 5-7). Taken as three candidates a frame, nothing was followed."""
+    from types import SimpleNamespace
+
+    from mirrorcap.core.track.bridge import bridge_gaps_along_2d_tracks
+    from mirrorcap.core.track.candidates import ClipCandidates
+
+    F, m = 8, 12
+    grid = np.stack(np.meshgrid(np.arange(-2, 3), np.arange(-2, 3)), axis=-1).reshape(-1, 2) * 8.0
+    neutral = np.c_[grid[:, 0] - 40.0, grid[:, 1], np.full(25, 600.0)]      # a patch facing the camera
+    path = neutral[m] + np.arange(F)[:, None] * [0.0, 3.0, 0.0]
+    frame = np.repeat(np.arange(F), 3)
+    slot = np.tile(np.arange(3), F)                                          # fused, mirror 0 only, mirror 1 only
+    mirror = np.c_[np.where(slot == 2, -1, frame), np.where(slot == 1, -1, frame)]
+    cands = ClipCandidates(path[frame], frame.copy(), mirror, np.zeros(3 * F), frame=frame,
+                           start=np.arange(F + 1) * 3)
+    dtrack = np.full(3 * F, 5)
+    mtrack = np.c_[np.where(mirror[:, 0] < 0, -1, np.where(frame <= 4, 7, 8)), np.where(mirror[:, 1] < 0, -1, 11)]
+    measured = np.zeros((F, 25), bool)
+    measured[:3, m] = True
+    candidate = np.zeros((F, 25), int)
+    candidate[:, m] = cands.start[:-1]                                       # the fused candidates
+    take = _labelled_take(measured, neutral, candidate)
+    take.assigned_blob[measured] = 0
+    take.points[:3, m] = path[:3]
+    take.head_frame = take.points.copy()
+    planes = (np.array([[0.5, 0.0, -0.866], [-0.5, 0.0, -0.866]]), np.array([-300.0, -300.0]))
+    det = SimpleNamespace(start=[np.arange(F + 1)] * 3, frame=[np.arange(F)] * 3)
+    take = bridge_gaps_along_2d_tracks(take, det, cands, (dtrack, mtrack), planes)
+    assert take.stats["bridged"].tolist() == [0, 0, 0, 1, 1, 1, 1, 1]
+    assert take.candidate[3:, m].tolist() == [9, 12, 17, 20, 23]             # fused twice, then mirror 1's
+    assert take.camera_mask[3:, m].tolist() == [7, 7, 5, 5, 5]
+    assert np.allclose(take.points[3:, m], path[3:])
+
+
 def test_a_view_sees_a_dot_face_on_within_the_angle_of_its_surface_normal():
     """geometry.surface: the normals of a bent sheet of markers by principal components point to the
     camera side; seen_face_on compares each camera's direction with the normal (the camera at the

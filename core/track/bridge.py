@@ -136,10 +136,21 @@ def bridge_gaps_along_2d_tracks(result: TrackResult, det: ClipDetections, cands:
         block = by_track[np.searchsorted(sorted_tracks, da, "left"):np.searchsorted(sorted_tracks, da, "right")]
         block = block[block >= cands.start[a + 1]]
         mt = mirror_track[block]
-        block = block[~claimed[block] & ((mt == ma) | ((mt < 0) & (ma >= 0))).all(axis=1)
-                      & ((mt == ma) & (ma >= 0)).any(axis=1)]
+        shared = ((mt == ma) & (ma >= 0)).sum(axis=1)                # the marker's mirror tracks each continues
+        ok = ~claimed[block] & ((mt == ma) | ((mt < 0) & (ma >= 0))).all(axis=1) & (shared > 0)
+        block, shared = block[ok], shared[ok]
+        if block.size < BRIDGE_MIN_FRAMES:
+            continue
+        # per frame the candidate sharing the most tracks (the fused one of a dot seen in both mirrors, not its
+        # single-mirror pairings); a tie is two dots
         f = cands.frame[block]
-        run = np.r_[f[:1] == a + 1, np.diff(f) == 1] if f.size else np.zeros(0, bool)
+        order = np.lexsort((-shared, f))
+        block, f, shared = block[order], f[order], shared[order]
+        lead = np.flatnonzero(np.r_[True, f[1:] != f[:-1]])
+        nxt = np.minimum(lead + 1, f.size - 1)
+        tied = (nxt > lead) & (f[nxt] == f[lead]) & (shared[nxt] == shared[lead])
+        block, f = block[lead], f[lead]
+        run = (f == a + 1 + np.arange(f.size)) & ~tied
         n = int(np.argmin(run)) if not run.all() else run.size      # the chain from a + 1, one candidate a frame
         if n >= BRIDGE_MIN_FRAMES:
             bridge(m, a, block[:n], None)
