@@ -66,15 +66,18 @@ def off_in_mirrors(markers, views, point, used, planes, off_mm: float) -> bool:
     return True
 
 
+SHARED_TRACK_FRAMES = 64  # frames of a label on a shared mirror track whose face offsets are read (evenly spread)
+
+
 def off_face_on_shared_tracks(result, mirror_track, off_mm: float) -> np.ndarray:
     """Measurements ``(F, N)`` to undo: of two labels measured on one 2D track of a mirror (``mirror_track``
     ``(C, K)`` per candidate, :func:`.pairing.candidate_tracks`), in frames of their own, the one whose points lie
-    off the face (:func:`face_offset` against the frame's other measured markers, median over its frames on the
-    track, :func:`beyond` ``off_mm``) while another's lie on it -- its frames on that track. A dot seen only
-    directly pairs with a like dot's grazing image on its line from the first frames, and the image's own dot
-    takes its image where it can (hr2: two forehead dots 17-19 mm off along the ray for 63 and 36 frames; their
-    points 10.5 and 22.3 mm off the face, the owners' 3.4 and 1.1 mm). Two markers that merely share a track at
-    different times both lie on the face and stay."""
+    off the face (:func:`face_offset` against the frame's other measured markers, median over up to
+    :data:`SHARED_TRACK_FRAMES` of its frames on the track, :func:`beyond` ``off_mm``) while another's lie on it --
+    its frames on that track. A dot seen only directly pairs with a like dot's grazing image on its line from the
+    first frames, and the image's own dot takes its image where it can (hr2: two forehead dots 17-19 mm off along
+    the ray for 63 and 36 frames, their points a median 5.3 and 22.2 mm off the face, the owners' 3.6 and 1.9 mm:
+    the second goes). Two markers that merely share a track at different times both lie on the face and stay."""
     F, N = result.assigned_blob.shape
     drop = np.zeros((F, N), bool)
     measured = (result.assigned_blob >= 0) & (result.candidate >= 0) & np.isfinite(result.points[..., 0])
@@ -89,9 +92,11 @@ def off_face_on_shared_tracks(result, mirror_track, off_mm: float) -> np.ndarray
             off = np.zeros(labels.size, bool)
             for i, lab in enumerate(labels):
                 frames = frame[(track == x) & (label == lab)]
+                frames = frames[np.linspace(0, frames.size - 1, min(frames.size, SHARED_TRACK_FRAMES)).astype(int)]
                 offsets = np.array([face_offset(result.points[f, measured[f] & (np.arange(N) != lab)],
                                                 result.points[f, lab]) for f in frames])
-                off[i] = beyond(tuple(np.nanmedian(offsets, axis=0)), off_mm)
+                offsets = offsets[np.isfinite(offsets[:, 0])]
+                off[i] = offsets.size > 0 and beyond(tuple(np.median(offsets, axis=0)), off_mm)
             if off.any() and not off.all():
                 for lab in labels[off]:
                     drop[frame[(track == x) & (label == lab)], lab] = True
