@@ -7,7 +7,10 @@ which loads the Blender layer (:mod:`.addon`) only then. Outside Blender,
 (:mod:`.cli`). ``docs/architecture.md`` shows how the packages fit together.
 """
 
-from .core import __version__
+# Blender imports this file as the package bl_ext.<repo>.mirrorcap, Python as mirrorcap; pytest imports it alone,
+# as "__init__", when the repository's folder is no Python name (a clone in "mirrorcap-main" or "my clone")
+if __package__:
+    from .core import __version__
 
 
 def register():

@@ -43,3 +43,19 @@ def test_one_import_name_for_the_core():
         for path in (ROOT / pkg).rglob("*.py"):
             text = path.read_text()
             assert "from mirrorcap" not in text and "import mirrorcap" not in text, path
+
+
+def test_the_test_suite_runs_in_a_folder_that_is_no_python_name(tmp_path):
+    """A clone in "mirrorcap-main" (a GitHub zip) or "my clone": pytest collects the repository's root as a package
+    it cannot name and imports its ``__init__.py`` alone, as "__init__", before every test (397 errors in a clone
+    in "clone dir", stop 52). The file then defines nothing and raises nothing; imported as the package it is, it
+    gives the version."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("__init__", ROOT / "__init__.py")
+    alone = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(alone)                      # no parent package: its relative import would raise
+    assert not hasattr(alone, "__version__") and callable(alone.register)
+    import mirrorcap
+
+    assert mirrorcap.__version__ == mirrorcap.core.__version__
