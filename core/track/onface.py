@@ -23,16 +23,32 @@ def face_offset(neutral, point, k: int = FACE_MARKERS) -> tuple:
     the camera), and the RMS misfit of that face to its markers (mm). The face: the plane
     ``z = a x' + b y' + c`` (``x' = x/z``, ``y' = y/z``, the ray's direction) through the ``k`` markers
     nearest to its ray, least squares. ``(nan, nan)`` with fewer than ``k`` markers."""
-    if len(neutral) < k or not np.all(np.isfinite(point)) or point[2] <= 0:
-        return float("nan"), float("nan")
-    rays = neutral[:, :2] / neutral[:, 2:3]
-    ray = point[:2] / point[2]
-    near = np.argsort(np.linalg.norm(rays - ray, axis=1))[:k]
-    A = np.c_[rays[near], np.ones(k)]
-    coef, *_ = np.linalg.lstsq(A, neutral[near, 2], rcond=None)
-    z_face = float(np.r_[ray, 1.0] @ coef)
-    misfit = float(np.sqrt(np.mean((A @ coef - neutral[near, 2]) ** 2)))
-    return abs(point[2] - z_face) * float(np.sqrt(1.0 + ray @ ray)), misfit
+    distance, misfit = face_offsets(np.asarray(neutral, float)[None], np.asarray(point, float)[None], k)
+    return float(distance[0]), float(misfit[0])
+
+
+def face_offsets(markers, points, k: int = FACE_MARKERS) -> tuple:
+    """:func:`face_offset` of many points at once: ``points`` ``(Q, 3)``, each against its own markers ``markers``
+    ``(Q, N, 3)`` (NaN rows: not there). Returns ``(distance (Q,), misfit (Q,))``, NaN where fewer than ``k``
+    markers are there."""
+    markers, points = np.asarray(markers, float), np.asarray(points, float)
+    distance, misfit = np.full(len(points), np.nan), np.full(len(points), np.nan)
+    there = np.all(np.isfinite(markers), axis=2) & (np.nan_to_num(markers[..., 2]) > 0)
+    ok = np.all(np.isfinite(points), axis=1) & (np.nan_to_num(points[:, 2]) > 0) & (there.sum(axis=1) >= k)
+    if not ok.any():
+        return distance, misfit
+    m, p, there = markers[ok], points[ok], there[ok]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rays = m[..., :2] / m[..., 2:3]
+    ray = p[:, :2] / p[:, 2:3]
+    near = np.argsort(np.where(there, np.linalg.norm(rays - ray[:, None], axis=2), np.inf), axis=1)[:, :k]
+    A = np.concatenate([np.take_along_axis(rays, near[..., None], axis=1), np.ones(near.shape + (1,))], axis=2)
+    z = np.take_along_axis(m[..., 2], near, axis=1)
+    coef = (np.linalg.pinv(A) @ z[..., None])[..., 0]                  # least squares, (q, 3)
+    z_face = np.einsum("qi,qi->q", np.c_[ray, np.ones(len(ray))], coef)
+    misfit[ok] = np.sqrt(np.mean((np.einsum("qki,qi->qk", A, coef) - z) ** 2, axis=1))
+    distance[ok] = np.abs(p[:, 2] - z_face) * np.sqrt(1.0 + np.einsum("qi,qi->q", ray, ray))
+    return distance, misfit
 
 
 def off_the_face(neutral, point, off_mm: float, k: int = FACE_MARKERS) -> bool:
@@ -85,19 +101,23 @@ def off_face_on_shared_tracks(result, mirror_track, off_mm: float) -> np.ndarray
     for k in range(mirror_track.shape[1]):
         frame, label = np.nonzero(measured & (mirror_track[cand, k] >= 0))
         track = mirror_track[cand[frame, label], k]
-        pair = np.unique(np.c_[track, label], axis=0)                        # (track, label) in use
-        shared = np.unique(pair[:, 0], return_counts=True)
-        for x in shared[0][shared[1] > 1]:
-            labels = pair[pair[:, 0] == x, 1]
-            off = np.zeros(labels.size, bool)
-            for i, lab in enumerate(labels):
-                frames = frame[(track == x) & (label == lab)]
+        order = np.lexsort((frame, label, track))                        # by track, then label, then frame
+        frame, label, track = frame[order], label[order], track[order]
+        start = np.flatnonzero(np.r_[True, (track[1:] != track[:-1]) | (label[1:] != label[:-1])])
+        end = np.r_[start[1:], track.size]                               # one (track, label) run each
+        first = np.flatnonzero(np.r_[True, track[start[1:]] != track[start[:-1]]])    # each track's first run
+        runs = np.diff(np.r_[first, start.size])
+        for a, n in zip(first[runs > 1], runs[runs > 1]):                # tracks two labels or more measure on
+            off = np.zeros(n, bool)
+            for i, r in enumerate(range(a, a + n)):
+                frames, lab = frame[start[r]:end[r]], label[start[r]]
                 frames = frames[np.linspace(0, frames.size - 1, min(frames.size, SHARED_TRACK_FRAMES)).astype(int)]
-                offsets = np.array([face_offset(result.points[f, measured[f] & (np.arange(N) != lab)],
-                                                result.points[f, lab]) for f in frames])
-                offsets = offsets[np.isfinite(offsets[:, 0])]
-                off[i] = offsets.size > 0 and beyond(tuple(np.median(offsets, axis=0)), off_mm)
+                others = measured[frames] & (np.arange(N) != lab)
+                offsets = np.vstack(face_offsets(np.where(others[..., None], result.points[frames], np.nan),
+                                                 result.points[frames, lab]))            # (2, frames)
+                offsets = offsets[:, np.isfinite(offsets[0])]
+                off[i] = offsets.size > 0 and beyond(tuple(np.median(offsets, axis=1)), off_mm)
             if off.any() and not off.all():
-                for lab in labels[off]:
-                    drop[frame[(track == x) & (label == lab)], lab] = True
+                for r in np.arange(a, a + n)[off]:
+                    drop[frame[start[r]:end[r]], label[start[r]]] = True
     return drop
