@@ -14,7 +14,7 @@ from ...core.common.errors import InputError
 from ..common.inputs import (head_object_from, input_path, required, scene_marker_map, scene_settings,
                              selected_marker_labels)
 from ..common.jobs import MirrorCapJobOperator, MirrorCapOperator
-from ..common.keys import set_scene_rate
+from ..common.keys import TakeStretch, set_scene_rate
 from ..common.properties import BAKE_MODES
 
 
@@ -145,7 +145,7 @@ class MIRRORCAP_OT_bind(_UnseenMarkers, MirrorCapOperator):
                 f"marker-to-vertex distance max {b.distance_mm.max():.2f} mm")
 
 
-class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
+class MIRRORCAP_OT_bake(_UnseenMarkers, TakeStretch, MirrorCapJobOperator):
     """Bake a C3D take onto the head as shape keys (face rig: regions, jaw, inner lip, blinks)"""
 
     bl_idname = "mirrorcap.bake"
@@ -161,10 +161,6 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
     blink_seed: IntProperty(name="Blink Seed", default=0)
     fap: StringProperty(name="FAP File", subtype="FILE_PATH",
                         description="an MPEG-4 .fap file to play on the head instead of the take")
-    take_start: IntProperty(name="From Take Frame", default=0, min=0,
-                            description="first take frame to bake (0-based; the whole take is bound)")
-    take_end: IntProperty(name="To Take Frame", default=0, min=0,
-                          description="take frame to stop before (0: the take's end)")
 
     def prepare(self, context):
         from ...core.take.c3d import read_c3d
@@ -184,11 +180,9 @@ class MIRRORCAP_OT_bake(_UnseenMarkers, MirrorCapJobOperator):
             data = read_c3d(required(input_path(self.take, scene_settings(context).take, what="take"),
                                      "take (TAKE.c3d)"))
             mapping = scene_marker_map(context)
-        from ...core.face.animate import take_frame_range
-
         from ..common.shape_keys import check_keying
 
-        frames = take_frame_range((self.take_start, self.take_end or None), data["points"].shape[0])
+        frames = self.stretch(data["points"].shape[0])
         check_keying(self.mode, self.modes, frames[1] - frames[0], modes_option="Modes")
         self._obj_name = obj.name
 

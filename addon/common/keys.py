@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
+from bpy.props import IntProperty
 
 from ...core.common.errors import InputError
 
@@ -48,3 +49,19 @@ def keyed_frames(scene, frame_start: int, n_frames: int) -> np.ndarray:
                          f"frames {lowest}..{highest}")
     scene.frame_start, scene.frame_end = frame_start, frame_start + n_frames - 1
     return frame_start + np.arange(n_frames)
+
+
+class TakeStretch:
+    """The Bake and Retarget operators' stretch of the take to key (the panels pass the scene's From and To)."""
+
+    take_start: IntProperty(name="From Take Frame", default=0, min=0,
+                            description="first take frame to key (0-based; the whole take is bound)")
+    take_end: IntProperty(name="To Take Frame", default=0, min=0,
+                          description="take frame to stop before (0: the take's end)")
+
+    def stretch(self, n_frames: int) -> tuple:
+        """The take frames ``(START, END)`` to key of a take of ``n_frames`` frames, checked
+        (:func:`core.face.animate.take_frame_range`)."""
+        from ...core.face.animate import take_frame_range
+
+        return take_frame_range((self.take_start, self.take_end or None), n_frames)

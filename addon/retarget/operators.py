@@ -14,11 +14,11 @@ from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
 from ...core.common.errors import InputError
 from ..common.inputs import head_object_from, input_path, required, scene_marker_map, scene_settings
 from ..common.jobs import MirrorCapJobOperator
-from ..common.keys import set_scene_rate
+from ..common.keys import TakeStretch, set_scene_rate
 from ..common.properties import BAKE_MODES, RETARGET_METHODS
 
 
-class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
+class MIRRORCAP_OT_retarget(TakeStretch, MirrorCapJobOperator):
     """Retarget the take onto the character: ARKit-52 weights on its shape keys, or the motion itself
 (transfer) onto a character with landmarks"""
 
@@ -36,10 +36,6 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
     csv: StringProperty(name="Live Link CSV", subtype="FILE_PATH", description="LIVELINK.csv to write (optional)")
     neutral_frame: IntProperty(name="Neutral Frame", default=0, min=0)
     smoothness: FloatProperty(name="Smoothness", default=8.0, min=0.0, description="temporal smoothness lambda, mm^2")
-    take_start: IntProperty(name="From Take Frame", default=0, min=0,
-                            description="first take frame to key (0-based; the whole take is bound and solved)")
-    take_end: IntProperty(name="To Take Frame", default=0, min=0,
-                          description="take frame to stop before (0: the take's end)")
 
     def prepare(self, context):
         from ...core.take.c3d import read_c3d
@@ -61,7 +57,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         if csv is not None and not csv.parent.is_dir():
             raise InputError(f"the CSV's folder {csv.parent} does not exist (save the .blend first for // paths)")
         data = read_c3d(required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)"))
-        frames = self._stretch(data)
+        frames = self.stretch(data["points"].shape[0])
         head = read_head(actor)
         head.validate()
         keys = read_shape_keys(actor)
@@ -81,12 +77,6 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
 
         return work
 
-    def _stretch(self, data) -> tuple:
-        """The take frames ``(START, END)`` to key: From/To, checked against the take."""
-        from ...core.face.animate import take_frame_range
-
-        return take_frame_range((self.take_start, self.take_end or None), data["points"].shape[0])
-
     def _prepare_transfer(self, context, s, actor, target):
         from ...core.retarget.transfer import check_landmarks
         from ...core.take.c3d import read_c3d
@@ -94,7 +84,7 @@ class MIRRORCAP_OT_retarget(MirrorCapJobOperator):
         from ..common.shape_keys import check_keying
 
         data = read_c3d(required(input_path(self.take, s.take, what="take"), "take (TAKE.c3d)"))
-        frames = self._stretch(data)
+        frames = self.stretch(data["points"].shape[0])
         head = read_head(actor)
         head.validate()
         keys = read_shape_keys(actor)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 
 import numpy as np
 
@@ -22,7 +21,7 @@ from ..geometry.rigid import rotation_zyx
 from .bind import Binding, bind_take
 from .facerig import FaceRig, RigSettings
 from .head import HeadModel
-from .shapes import BLOCK_FRAMES
+from .shapes import FrameSource
 
 UNSEEN_POLICIES = ("error", "drop", "conjecture")
 SPARSE_MARKERS = 40              # a take binding at most this many markers is sparse (a VICON-style layout)
@@ -31,7 +30,7 @@ SPARSE_BLINK_INTERVAL_S = 4.0    # Huang et al. 2000, section 3.2
 
 
 @dataclass
-class Animation:
+class Animation(FrameSource):
     """A take animated on a head: its frames ``frames[0]`` .. ``frames[1] - 1`` (the binding covers the whole
     take). The vertex displacements ``(F, V, 3)`` (mm, head frame) come from the face rig when asked for: all at
     once (:attr:`displacements`), at chosen frames (:meth:`at`) or a block of frames at a time (:meth:`blocks`),
@@ -43,6 +42,7 @@ class Animation:
     rate: float
     frames: tuple                     # (START, END): the take frames animated, END exclusive
     timings_s: dict = field(default_factory=dict)
+    _deformed: np.ndarray | None = field(default=None, repr=False)    # all the frames', once deformed
 
     @property
     def n_frames(self) -> int:
@@ -51,18 +51,13 @@ class Animation:
     def at(self, index) -> np.ndarray:
         """The displacements ``(n, V, 3)`` at the animated frames ``index`` (a slice or indices, 0 = ``frames[0]``),
         as the whole take's deformation has them there (blinks included)."""
-        if "displacements" in self.__dict__:               # computed already (the cached property below)
-            return self.displacements[index]
+        if self._deformed is not None:
+            return self._deformed[index]
         start, end = self.frames
         return self.rig.deform(self.binding.displacements[start:end][index], self.rate,
                                closure=self.parts["blink"][index])
 
-    def blocks(self, size: int = BLOCK_FRAMES):
-        """``(offset, displacements (n, V, 3))`` for consecutive blocks of at most ``size`` frames."""
-        for f0 in range(0, self.n_frames, size):
-            yield f0, self.at(slice(f0, min(self.n_frames, f0 + size)))
-
-    @cached_property
+    @property
     def displacements(self) -> np.ndarray:
         """All the animated frames' displacements ``(F, V, 3)`` (:meth:`deform_all`)."""
         return self.deform_all()
@@ -70,17 +65,16 @@ class Animation:
     def deform_all(self, progress=None) -> np.ndarray:
         """All the animated frames' displacements ``(F, V, 3)``, deformed a block of frames at a time with
         ``progress(fraction)`` after each, and kept as :attr:`displacements`."""
-        if "displacements" in self.__dict__:
-            return self.displacements
-        D = None
-        for f0, block in self.blocks():
-            if D is None:
-                D = np.empty((self.n_frames,) + block.shape[1:])
-            D[f0:f0 + len(block)] = block
-            if progress:
-                progress((f0 + len(block)) / self.n_frames)
-        self.__dict__["displacements"] = D
-        return D
+        if self._deformed is None:
+            D = None
+            for f0, block in self.blocks():
+                if D is None:
+                    D = np.empty((self.n_frames,) + block.shape[1:])
+                D[f0:f0 + len(block)] = block
+                if progress:
+                    progress((f0 + len(block)) / self.n_frames)
+            self._deformed = D
+        return self._deformed
 
     @property
     def head_motion(self) -> tuple:

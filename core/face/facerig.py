@@ -380,7 +380,10 @@ class FaceRig:
     def motion(self, marker_disp, closure) -> dict:
         """The rig's per-frame parts without the vertices: the chin's displacement, the jaw's angle and stretch
         (:meth:`jaw_motion`) and the lids' ``closure``."""
-        _, chin = self._controls(marker_disp)
+        return self._parts(self._controls(marker_disp)[1], closure)
+
+    def _parts(self, chin, closure) -> dict:
+        """:meth:`motion`'s parts from the chin's displacement ``(F, 3)`` and the lids' ``closure (F,)``."""
         theta, stretch = self.jaw_motion(chin)
         return {"jaw_angle": theta, "jaw_stretch": stretch, "blink": np.asarray(closure, float), "chin": chin}
 
@@ -394,7 +397,8 @@ class FaceRig:
         closure = self.closure(F, fps) if closure is None else np.asarray(closure, float)
         if closure.shape != (F,):
             raise InputError(f"a closure per frame: ({F},), not {closure.shape}")
-        theta, stretch = self.jaw_motion(chin)
+        parts = self._parts(chin, closure)
+        theta, stretch = parts["jaw_angle"], parts["jaw_stretch"]
         # jaw: rigid part at the jaw-moving vertices and at the controls, residual through the RBF
         J_ctrl = self._jaw_displacement(V[self.controls], theta, stretch)
         n_f = self.fixed.size
@@ -436,6 +440,4 @@ class FaceRig:
                 ang = closure[shut, None] * lid["weights"][None, :] * lid["angle"]
                 D[np.ix_(shut, idx)] += _rotate(np.broadcast_to(rel, (shut.size,) + rel.shape), lid["axis"],
                                                 ang) - rel[None]
-        if with_parts:
-            return D, {"jaw_angle": theta, "jaw_stretch": stretch, "blink": closure, "chin": chin}
-        return D
+        return (D, parts) if with_parts else D

@@ -48,9 +48,24 @@ def _eigen_deformations(A, k: int):
     return E, lam
 
 
-class ArrayDisplacements:
-    """Displacements ``(F, V, 3)`` held in memory, served as :class:`..animate.Animation` serves them (``n_frames``,
-    ``at(index)``, ``blocks(size)``): the two kinds :func:`pca_shapes` and the shape-key writer take."""
+class FrameSource:
+    """Displacements ``(F, V, 3)`` served some frames at a time: ``n_frames`` and ``at(index)`` (a slice or
+    indices), and from them :meth:`blocks` -- what :func:`pca_shapes` and the shape-key writer take
+    (:class:`ArrayDisplacements`, :class:`..animate.Animation`)."""
+
+    n_frames: int
+
+    def at(self, index) -> np.ndarray:
+        raise NotImplementedError
+
+    def blocks(self, size: int = BLOCK_FRAMES):
+        """``(offset, displacements (n, V, 3))`` for consecutive blocks of at most ``size`` frames."""
+        for f0 in range(0, self.n_frames, size):
+            yield f0, self.at(slice(f0, min(self.n_frames, f0 + size)))
+
+
+class ArrayDisplacements(FrameSource):
+    """Displacements ``(F, V, 3)`` held in memory."""
 
     def __init__(self, displacements):
         self.array = np.asarray(displacements, float)
@@ -61,15 +76,11 @@ class ArrayDisplacements:
     def at(self, index) -> np.ndarray:
         return self.array[index]
 
-    def blocks(self, size: int = BLOCK_FRAMES):
-        for f0 in range(0, self.n_frames, size):
-            yield f0, self.array[f0:f0 + size]
-
 
 def displacement_source(displacements):
-    """``displacements`` as a source of frames: an :class:`..animate.Animation` (or any object with
-    ``n_frames``, ``at`` and ``blocks``) as it is, an array wrapped in :class:`ArrayDisplacements`."""
-    return displacements if hasattr(displacements, "blocks") else ArrayDisplacements(displacements)
+    """``displacements`` as a source of frames: a :class:`FrameSource` (an :class:`..animate.Animation`) as it
+    is, an array wrapped in :class:`ArrayDisplacements`."""
+    return displacements if isinstance(displacements, FrameSource) else ArrayDisplacements(displacements)
 
 
 def pca_shapes(displacements, n_modes: int, basis_frames: int = PCA_BASIS_FRAMES) -> PCAShapes:

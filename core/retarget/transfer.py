@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..common.errors import InputError
+from ..face.animate import take_frame_range
 from ..face.bind import Binding, bind_take
 from ..face.facerig import JAW_RIDING, FaceRig, RigSettings
 from ..face.head import LANDMARKS, NOT_SKIN, REGIONS, HeadModel
@@ -366,7 +367,7 @@ def actor_motion(head: HeadModel, shape_keys: dict | None, binding: Binding, rat
     there."""
     settings = settings or RigSettings()
     n_take = binding.displacements.shape[0]
-    start, end = (0, n_take) if frames is None else frames
+    start, end = take_frame_range(frames, n_take)
     F = end - start
     prior = np.zeros((F, len(head.vertices), 3))
     parts = {"weights": None, "names": [], "prior_solve": None}
