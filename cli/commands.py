@@ -91,12 +91,16 @@ def calibrate(args) -> int:
     return 0
 
 
-def _colours_and_light(args):
-    """The capture's colour classes and light from ``--colors`` and ``--light``."""
+def _colours_and_light(args, source=None, start: int = 0):
+    """The capture's colour classes and light from ``--colors`` and ``--light``; with neither saying the light,
+    frame ``start`` of ``source`` shows it (:func:`core.capture.markers.capture_light`), and a line says so."""
     from ..core.capture.markers import ColorClasses, capture_light
 
-    colors = ColorClasses.load(args.colors) if args.colors else None
-    light = capture_light(args.light, colors)
+    colors = ColorClasses.load(args.colors) if getattr(args, "colors", None) else None
+    light = capture_light(args.light, colors, source, start)
+    if source is not None and args.light is None and not (colors and colors.light) and not args.quiet:
+        print(f"light: {'ordinary (coloured dots)' if light == 'normal' else 'UV'}, as frame {start} shows it "
+              f"(--light {'uv' if light == 'normal' else 'normal'} to say otherwise)")
     return colors or ColorClasses.default(light), light
 
 
@@ -106,7 +110,8 @@ def detect(args) -> int:
     from ..core.capture.rig import load_rig, view_boundary_warnings
     from ..core.geometry.camera import Camera
 
-    colors, light = _colours_and_light(args)
+    source, start, end = _open(args)
+    colors, light = _colours_and_light(args, source, start)
     layout = load_rig(args.rig).views
     camera = Camera.load(args.camera) if args.camera else None
     if args.threshold < 0 or args.threshold >= 255:
@@ -115,7 +120,6 @@ def detect(args) -> int:
         raise MirrorCapError("--min-area must be at least 1 and --marker-diameter non-negative")
     settings = ExtractionSettings(light=light, threshold=args.threshold, min_area=args.min_area,
                                   marker_diameter_px=args.marker_diameter, washed_out=args.washed_out)
-    source, start, end = _open(args)
     report = run_detection(source, args.output, colors=colors, settings=settings, layout=layout, camera=camera,
                            start=start, end=end, step=args.step,
                            progress=None if args.quiet else _progress_line)
@@ -146,7 +150,8 @@ def track(args) -> int:
     from ..core.track.tracker import TrackSettings
 
     camera = Camera.load(args.camera)
-    colors, light = _colours_and_light(args)
+    source, start, end = _open(args)
+    colors, light = _colours_and_light(args, source, start)
     rig = load_rig(args.rig)
     rigid, rigid_source = rigid_markers((0, 0, 0, 0), (), rig, colors)
     mirrors = load_mirrors(args.mirrors) if args.mirrors else None
@@ -157,7 +162,6 @@ def track(args) -> int:
         raise MirrorCapError("--conjecture-limit must be a number of millimetres, 0 or more (or inf)")
     settings = TrackSettings.with_conjecture_limit(args.conjecture_limit)
     seeds = read_seeds(args.seeds, camera.image_size) if args.seeds else None
-    source, start, end = _open(args)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
                        colors=colors, extraction=ExtractionSettings(light=light, washed_out=args.washed_out),
                        layout=rig.views, mirrors=mirrors,
@@ -214,9 +218,10 @@ def colors_learn(args) -> int:
     from ..core.common.files import write_files_atomically
 
     source, start, end = _open(args)
+    light = _colours_and_light(args, source, start)[1]
     names = [n.strip() for n in args.names.split(",")] if args.names else None
     classes = learn_color_classes(source, args.classes, names=names, start=start, end=end, step=args.step,
-                                  threshold=args.threshold, light=args.light)
+                                  threshold=args.threshold, light=light)
     write_files_atomically({Path(args.output): json.dumps(classes.to_dict(), indent=2) + "\n"})
     if not args.quiet:
         print(f"{len(classes.names)} colour classes -> {args.output}: {', '.join(classes.names)}")

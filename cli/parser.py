@@ -63,7 +63,8 @@ def _source_options(parser, what: str = "video file, image folder or glob", fram
 def _light_option(parser) -> None:
     parser.add_argument("--light", choices=("uv", "normal"),
                         help="uv: fluorescent markers under black light; normal: coloured dots under ordinary "
-                             "lamps (default: what COLORS.json says, else uv)")
+                             "lamps (default: what COLORS.json says, else what the first frame shows -- a dark "
+                             "frame with bright dots is uv, a lit face normal)")
 
 
 def _washed_out_option(parser) -> None:
@@ -242,8 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
     learn.add_argument("-o", "--output", required=True, help="COLORS.json to write")
     learn.add_argument("--names", help="comma-separated class names, in hue order")
     learn.add_argument("--threshold", type=float, default=60.0, help="UV: brightness threshold on max(R,G,B)")
-    learn.add_argument("--light", choices=("uv", "normal"), default="uv",
-                       help="the capture's light (default uv); recorded in COLORS.json")
+    _light_option(learn)
     learn.set_defaults(func=commands.colors_learn)
 
     demo = sub.add_parser("demo-mirrors", help="mirror planes and 3D points of the embedded two-mirror sample",

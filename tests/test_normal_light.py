@@ -33,12 +33,12 @@ def _run(args, capsys):
 
 
 def _tracked(name, tmp_path, capsys, *options, out_name: str | None = None) -> str:
-    """``mirrorcap track`` on ``sample_scenes/normal/<name>`` as a user runs it (its rig file's views, normal light,
-    any further ``options``), the take and its report written to ``tmp_path / <out_name or name>.c3d`` and
+    """``mirrorcap track`` on ``sample_scenes/normal/<name>`` as a user runs it (its rig file's views, no light given:
+    the first frame shows it, any further ``options``), the take and its report written to ``tmp_path / <out_name or name>.c3d`` and
     ``.json``; returns what it printed."""
     clip = ROOT / "sample_scenes" / "normal" / name
     out_name = out_name or name
-    code, out, err = _run(["track", clip / "clip.mp4", "--light", "normal", "--camera", clip / "camera.json",
+    code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json",
                            "--rig", clip / "rig.json", "-o", tmp_path / f"{out_name}.c3d", "--report",
                            tmp_path / f"{out_name}.json", *options], capsys)
     assert code == 0, err
@@ -57,6 +57,41 @@ def _projections(truth, camera, f):
     P = truth["points"][f]
     return [camera.project(P)] + [camera.project(reflect_points(P, truth["mirror_normals"][k], truth["mirror_d"][k]))
                                   for k in range(2)]
+
+
+def test_the_light_is_read_from_the_first_frame(tmp_path, capsys):
+    """Stop 53: with no --light and no colour file saying, the first frame tells the light -- every committed clip
+    (30 UV, 18 normal-light: skins, compressions, blur, small dots) as its clip.json says it was rendered. Then as a
+    user runs it: `detect` and `colors learn` on the light-skin clip with no --light say and use normal light (a
+    hs4-like clip was refused with "cannot split the direct and mirror views" before); on a UV clip, UV; a colour
+    file's light is taken without a word."""
+    from mirrorcap.core.capture.markers import LIT_SHARE, lit_share, light_of_frame
+
+    shares = {"uv": [], "normal": []}
+    for mp4 in sorted((ROOT / "sample_scenes").glob("*/**/clip.mp4")):
+        made = mp4.parent / "clip.json"
+        light = json.loads(made.read_text()).get("light", "uv") if made.is_file() else "uv"
+        frame = next(iter(open_source(mp4).frames(0, 1)))[1]
+        assert light_of_frame(frame) == light, mp4
+        shares[light].append(lit_share(frame))
+    assert len(shares["uv"]) >= 28 and len(shares["normal"]) >= 18
+    assert max(shares["uv"]) < LIT_SHARE / 2 and min(shares["normal"]) > 2 * LIT_SHARE    # a margin both ways
+    code, out, err = _run(["detect", CLIPS["light"] / "clip.mp4", "--frames", "0:3", "-o", tmp_path / "d.csv"], capsys)
+    assert code == 0, err
+    assert "light: ordinary (coloured dots), as frame 0 shows it (--light uv to say otherwise)" in out
+    report = json.loads((tmp_path / "d.json").read_text())
+    assert report["settings"]["light"] == "normal" and report["counts"]["direct"] > 3 * 100     # under UV: 8 a frame
+    code, out, err = _run(["colors", "learn", CLIPS["light"] / "clip.mp4", "--classes", "4", "--frames", "0:10",
+                           "-o", tmp_path / "c.json"], capsys)
+    assert code == 0 and "light: ordinary" in out and ColorClasses.load(tmp_path / "c.json").light == "normal"
+    code, out, err = _run(["detect", CLIPS["light"] / "clip.mp4", "--colors", tmp_path / "c.json", "--frames", "0:2",
+                           "-o", tmp_path / "e.csv"], capsys)
+    assert code == 0 and "light:" not in out and json.loads((tmp_path / "e.json").read_text())["settings"]["light"] \
+        == "normal"
+    uv_clip = ROOT / "sample_scenes" / "stress" / "sparse" / "clip.mp4"
+    code, out, err = _run(["detect", uv_clip, "--frames", "0:2", "-o", tmp_path / "u.csv"], capsys)
+    assert code == 0 and "light: UV, as frame 0 shows it (--light normal to say otherwise)" in out
+    assert json.loads((tmp_path / "u.json").read_text())["settings"]["light"] == "uv"
 
 
 @pytest.mark.parametrize("tone", ["light", "dark"])
@@ -95,7 +130,8 @@ def test_coloured_dots_are_found_in_every_view_on_both_skins(tone):
 
 def test_the_uv_extractor_says_what_to_do_with_a_normal_light_clip(tmp_path, capsys):
     clip = CLIPS["light"]
-    code, out, err = _run(["detect", clip / "clip.mp4", "--frames", "0:10", "-o", tmp_path / "d.csv"], capsys)
+    code, out, err = _run(["detect", clip / "clip.mp4", "--frames", "0:10", "--light", "uv", "-o", tmp_path / "d.csv"],
+                          capsys)                      # stop 53: said, as the first frame would tell normal light
     if code == 0:        # a few bright pixels may pass the UV threshold; they are no markers
         rows = (tmp_path / "d.csv").read_text().splitlines()[1:]
         assert len(rows) < 10 * 40

@@ -103,14 +103,14 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         n = context.scene.frame_current - 1 if self.frame < 0 else self.frame
         n = min(max(n, 0), source.frame_count - 1)
         image = next(iter(source.frames(n, n + 1, 1)))[1]
-        rig, colors = rig_and_colours(s)
-        settings = extraction_settings(s)
+        rig, colors, light = rig_and_colours(s, source, n)
+        settings = extraction_settings(s, light)
         det = marker_extractor(colors, settings)(image)
         between = det.between_count()       # washed-out dots: as a take would decide, from this one frame
         det = between_chosen(det, keeps_between(settings.washed_out, between, len(det) - between))
         if len(det) == 0:
             raise InputError(f"no markers found in frame {n}: " + ("are there coloured dots of the colour classes on "
-                             "the face?" if s.light == "normal" else "is the clip dark with bright dots? (coloured dots "
+                             "the face?" if light == "normal" else "is the clip dark with bright dots? (coloured dots "
                              "under ordinary light: set Light to Normal)"))
         layout = rig.views or split_views_by_gaps(det.x, 2.0 * dot_diameter_px(settings, [det]))
         view = layout.assign(det.x, det.y)
@@ -118,7 +118,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         count = detections_to_clip_tracks(clip, n, det.x, det.y, det.color, view, source.size)
         per_view = np.bincount(view[view >= 0], minlength=3)
         dot_px = dot_px_by_view(det.area, view)
-        small = small_dot_warning(s.light, dot_px)
+        small = small_dot_warning(light, dot_px)
         if small:
             self.messages.warning(small)
         return (f"frame {n}: {count} markers ({per_view[0]} direct, {per_view[1]} mirror 0, {per_view[2]} mirror 1; "

@@ -23,7 +23,7 @@ class MIRRORCAP_PT_capture(SidebarPanel, bpy.types.Panel):
         col.prop(s, "rig")
         col.prop(s, "colors")
         col.prop(s, "light", expand=True)
-        if s.light == "normal":
+        if s.light != "uv":
             col.prop(s, "washed_out")
         col.separator()
         col.operator("mirrorcap.detect_markers", icon="TRACKER")

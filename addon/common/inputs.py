@@ -52,23 +52,25 @@ def head_object_from(context, name: str):
     return obj
 
 
-def rig_and_colours(s):
-    """The scene's rig file (RIG.json: views and rigid markers) and colour classes
-    (COLORS.json, else the four colours of the scene's light), each read once."""
+def rig_and_colours(s, source=None, start: int = 0):
+    """The scene's rig file (RIG.json: views and rigid markers), colour classes (COLORS.json, else the four
+    colours of the light) and light (the scene's Light; Auto: what COLORS.json says, else what frame ``start`` of
+    the rig video ``source`` shows, else UV: :func:`...core.capture.markers.capture_light`), each read once."""
     from ...core.capture.markers import ColorClasses, capture_light
     from ...core.capture.rig import load_rig
 
     rig = load_rig(input_path(s.rig, what="rig file") if s.rig else None)
-    colours = ColorClasses.load_or_default(input_path(s.colors, what="colour file") if s.colors else None, s.light)
-    capture_light(s.light, colours)          # a colour file made for the other light is refused
-    return rig, colours
+    colours = ColorClasses.load(input_path(s.colors, what="colour file")) if s.colors else None
+    light = capture_light(None if s.light == "auto" else s.light, colours, source, start)
+    return rig, colours or ColorClasses.default(light), light
 
 
-def extraction_settings(s):
-    """The marker extraction settings of the scene's light (and, under normal light, of its washed-out dots)."""
+def extraction_settings(s, light: str):
+    """The marker extraction settings of the capture's ``light`` (:func:`rig_and_colours`; under normal light, of
+    the scene's washed-out dots)."""
     from ...core.capture.markers import ExtractionSettings
 
-    return ExtractionSettings(light=s.light, washed_out=s.washed_out)
+    return ExtractionSettings(light=light, washed_out=s.washed_out)
 
 
 def rigid_from_settings(s, rig, colours):

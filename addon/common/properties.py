@@ -21,7 +21,9 @@ from bpy.props import (
 #: the add-on's own module: this package's parent (``bl_ext.<repo>.mirrorcap`` inside Blender)
 ADDON_ID = __package__.rsplit(".", 2)[0]  # the extension package: <...>.mirrorcap of <...>.mirrorcap.addon.common
 
-LIGHTS = (("uv", "UV", "fluorescent markers under black-light lamps"),
+LIGHTS = (("auto", "Auto", "what the colour file says, else what the video's first frame shows: a dark frame with "
+                            "bright dots is UV, a lit face ordinary light"),
+          ("uv", "UV", "fluorescent markers under black-light lamps"),
           ("normal", "Normal", "coloured dots under ordinary lamps"))
 RETARGET_METHODS = (("arkit", "ARKit-52", "solve ARKit weights and key the character's shape keys of the same names"),
                     ("transfer", "Transfer", "carry the motion itself onto a character with lm_* landmarks"))
@@ -47,7 +49,7 @@ class MirrorCapSettings(bpy.types.PropertyGroup):
     seeds: StringProperty(name="Seeds", subtype="FILE_PATH", default="",
                           description="SEEDS.csv (id,view,x,y): markers designated in the first tracked frame; "
                                       "their ids become their labels (optional)")
-    light: EnumProperty(name="Light", items=LIGHTS, default="uv",
+    light: EnumProperty(name="Light", items=LIGHTS, default="auto",
                         description="how the markers were lit: fluorescent under black light, or coloured dots")
     washed_out: EnumProperty(name="Washed-out Dots", items=WASHED_OUT, default="auto",
                              description="normal light: dots whose colour video compression washed out between the "

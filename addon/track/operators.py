@@ -87,7 +87,7 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
 
         s, camera, mirrors, take = self._common(context)
         source = open_source(required(input_path(self.video, s.video, what="rig video"), "rig video"))
-        rig, colors = rig_and_colours(s)
+        rig, colors, light = rig_and_colours(s, source, s.frame_start)
         layout = rig.views
         rigid, rigid_source = rigid_from_settings(s, rig, colors)
         seeds = None
@@ -104,7 +104,7 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
             from ...core.track.tracker import TrackSettings
 
             report = run_track(source, camera, take, report=take_report_path(take), colors=colors,
-                               extraction=extraction_settings(s), layout=layout,
+                               extraction=extraction_settings(s, light), layout=layout,
                                mirrors=mirrors, start=s.frame_start, end=end,
                                settings=TrackSettings.with_conjecture_limit(s.conjecture_limit_mm),
                                rigid=rigid, rigid_source=rigid_source, log=log, seeds=seeds,
@@ -129,6 +129,7 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
                                     description="the clip's tracking object holding the tracks (default: all)")
 
     def prepare(self, context):
+        from ...core.capture.video import open_source
         from ..common.clip import clip_tracks_to_detections, find_clip
 
         s, camera, mirrors, take = self._common(context)
@@ -138,7 +139,7 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
         if tuple(clip.size) != tuple(camera.image_size):
             raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the "
                              f"clip is {clip.size[0]}x{clip.size[1]}")
-        rig, colors = rig_and_colours(s)
+        rig, colors, _ = rig_and_colours(s, open_source(bpy.path.abspath(clip.filepath)))
         layout = rig.views
         rigid, rigid_source = rigid_from_settings(s, rig, colors)
         numbers, frames = clip_tracks_to_detections(clip, layout, self.tracking_object or None)

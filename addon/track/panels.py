@@ -20,7 +20,7 @@ class MIRRORCAP_PT_track(SidebarPanel, bpy.types.Panel):
         row.prop(s, "frame_end")
         col.prop(s, "conjecture_limit_mm")
         col.prop(s, "light", expand=True)
-        if s.light == "normal":
+        if s.light != "uv":
             col.prop(s, "washed_out")
         col.prop(s, "seeds")
         box = col.box()

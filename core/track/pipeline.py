@@ -128,7 +128,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                             known_length=known_length, step=step, settings=settings, progress=track_progress,
                             timings={"detect": t_detect}, face_distance_mm=face_distance_mm, rigid=rigid,
                             rigid_source=rigid_source, log=log, seeds=seeds, view_check=views,
-                            video=source.compression(), between=washed)
+                            video=source.compression(), between=washed, light=extraction.light)
 
 
 def _check_known_length(known_length) -> None:
@@ -161,7 +161,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
                      timings: dict | None = None, face_distance_mm: float = FACE_DISTANCE_MM, rigid=None,
                      rigid_source: str = "rig file", log: MessageLog | None = None, seeds=None,
                      view_check: dict | None = None, video: dict | None = None,
-                     between: dict | None = None) -> dict:
+                     between: dict | None = None, light: str | None = None) -> dict:
     """The tracking half of :func:`run_track`, from per-frame detections (:class:`FrameDets`,
     e.g. from Blender's own 2D tracks): mirror planes, tracking, scale, atomic outputs.
     ``rigid``: the markers that carry the head pose, as :func:`core.track.tracker.track` takes them.
@@ -170,7 +170,8 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     ``view_check``: :func:`..capture.rig.check_view_boundaries` of the detections' view layout
     (REPORT.json ``view_layout``; a warning when a boundary runs through dots); ``video``: the source's
     :meth:`..capture.video.VideoSource.compression` (REPORT.json ``video``); ``between``: the detection's
-    :func:`..capture.detect.between_classes` (REPORT.json ``between_classes``)."""
+    :func:`..capture.detect.between_classes` (REPORT.json ``between_classes``); ``light``: the light the markers
+    were found under (REPORT.json ``light``; None: the detections came from elsewhere)."""
     from ..capture.detect import VIDEO_QUALITY_HINT
     from .mirrorscale import both_mirror_samples, link_self_calibrated_scales, mirror_agreement, scale_link_warning
     from .coverage import coverage_warning, take_coverage
@@ -278,6 +279,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         "coverage": coverage,
         "video": video,
         "between_classes": between,
+        "light": light,
         "view_layout": view_check,
         "frames": {"first": numbers[0], "last": numbers[-1], "step": step, "count": len(numbers), "fps": rate},
         "markers": {"count": len(result.labels), "labels": result.labels,

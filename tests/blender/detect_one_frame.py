@@ -1,5 +1,5 @@
-"""Detect Markers on one frame of a normal-light clip, headless, in a factory-settings session; the
-operator's reports go to stdout (tests/test_addon.py reads them).
+"""Detect Markers on one frame of a normal-light clip, headless, in a factory-settings session, the scene's Light
+left at Auto (the frame shows it); the operator's reports go to stdout (tests/test_addon.py reads them).
 
     python tests/blender/detect_one_frame.py CLIP_DIR [WASHED_OUT]
 
@@ -20,7 +20,6 @@ s = bpy.context.scene.mirrorcap
 s.video = str(clip / "clip.mp4")
 s.camera = str(clip / "camera.json")
 s.rig = str(clip / "rig.json")
-s.light = "normal"
 if len(sys.argv) > 2:
     s.washed_out = sys.argv[2]
 bpy.ops.mirrorcap.open_clip(filepath=s.video)
