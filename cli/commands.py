@@ -111,13 +111,13 @@ def detect(args) -> int:
     from ..core.geometry.camera import Camera
 
     source, start, end = _open(args)
-    colors, light = _colours_and_light(args, source, start)
     layout = load_rig(args.rig).views
     camera = Camera.load(args.camera) if args.camera else None
     if args.threshold < 0 or args.threshold >= 255:
         raise MirrorCapError("--threshold must be in 0..254")
     if args.min_area < 1 or (args.marker_diameter is not None and args.marker_diameter < 0):
         raise MirrorCapError("--min-area must be at least 1 and --marker-diameter non-negative")
+    colors, light = _colours_and_light(args, source, start)
     settings = ExtractionSettings(light=light, threshold=args.threshold, min_area=args.min_area,
                                   marker_diameter_px=args.marker_diameter, washed_out=args.washed_out)
     report = run_detection(source, args.output, colors=colors, settings=settings, layout=layout, camera=camera,
@@ -145,15 +145,15 @@ def track(args) -> int:
     from ..core.capture.markers import ExtractionSettings
     from ..core.capture.rig import load_rig, rigid_markers
     from ..core.geometry.camera import Camera
-    from ..core.track.pipeline import run_track
+    from ..core.capture.video import check_frame_step
+    from ..core.common.files import check_output_paths
+    from ..core.track.pipeline import check_known_length, run_track
     from ..core.track.seeds import read_seeds
     from ..core.track.tracker import TrackSettings
 
     camera = Camera.load(args.camera)
     source, start, end = _open(args)
-    colors, light = _colours_and_light(args, source, start)
     rig = load_rig(args.rig)
-    rigid, rigid_source = rigid_markers((0, 0, 0, 0), (), rig, colors)
     mirrors = load_mirrors(args.mirrors) if args.mirrors else None
     known = _known_length(args)
     if not args.face_distance > 0:
@@ -162,6 +162,11 @@ def track(args) -> int:
         raise MirrorCapError("--conjecture-limit must be a number of millimetres, 0 or more (or inf)")
     settings = TrackSettings.with_conjecture_limit(args.conjecture_limit)
     seeds = read_seeds(args.seeds, camera.image_size) if args.seeds else None
+    check_output_paths(Path(args.output), Path(args.report) if args.report else None)  # refused before any frame
+    check_frame_step(args.step)                                                         # is read (the light's)
+    check_known_length(known)
+    colors, light = _colours_and_light(args, source, start)
+    rigid, rigid_source = rigid_markers((0, 0, 0, 0), (), rig, colors)
     report = run_track(source, camera, Path(args.output), report=Path(args.report) if args.report else None,
                        colors=colors, extraction=ExtractionSettings(light=light, washed_out=args.washed_out),
                        layout=rig.views, mirrors=mirrors,

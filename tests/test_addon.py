@@ -183,7 +183,8 @@ def test_detect_markers_says_when_the_mirrors_dots_are_too_small():
     1 % of its dots) gives each view's typical dot and the small-dot warning of `mirrorcap detect`; on the light
     clip (5.5 px in the mirrors) the sizes and no warning. (Stop 42: small540's dots wash out between the colour
     classes -- 22 % as many as the others on this frame -- and are kept, so mirror 0's typical dot reads 2.6 px;
-    with the scene's Washed-out Dots set to Drop, 2.8 px as before.)"""
+    with the scene's Washed-out Dots set to Drop, 2.8 px as before.) Stop 53: the scene's Light is left at Auto, and the
+    frame shows ordinary light."""
     outputs = {}
     for name, option in (("small540", ()), ("light", ()), ("small540", ("drop",))):
         res = _run([ROOT / "tests" / "blender" / "detect_one_frame.py", ROOT / "sample_scenes" / "normal" / name,
@@ -194,6 +195,7 @@ def test_detect_markers_says_when_the_mirrors_dots_are_too_small():
     assert "dots 3.2, 2.6, 2.5 px across" in outputs["small540"]
     assert "Warning: the mirrors' dots measure 2.6 px in mirror0 and 2.5 px in mirror1" in outputs["small540"]
     assert " px across) shown as tracks" in outputs["light"] and "dots measure" not in outputs["light"]
+    assert all("object; light: ordinary, as the frame shows it" in text for text in outputs.values())   # Light: Auto
 
 
 def test_take_operators_stabilize_and_marker_map(tmp_path):

@@ -132,7 +132,8 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
 def test_track_refuses_bad_outputs_and_options_before_any_frame(rig_clip, capsys, tmp_path, monkeypatch):
     """An output that could not be written, a frame step of 0, a frame rate of 0, a known length that is not
     positive: one message before any frame is read (a long take would otherwise fail at its end, after minutes
-    of work), and nothing written."""
+    of work), and nothing written. Well formed, with no --light and no colour file saying it, frame 0 is read once
+    for the light (stop 53), then the take's frames."""
     from mirrorcap.core.capture import video
 
     root, _ = rig_clip
@@ -164,7 +165,7 @@ def test_track_refuses_bad_outputs_and_options_before_any_frame(rig_clip, capsys
         assert read == [], (args, read)
         assert list(out.parent.iterdir()) == []
     code, err = _run(["track", *clip, "-o", out, "--frames", "0:3", "-q"], capsys)   # and the same run, well formed
-    assert code == 0 and read == [0, 1, 2] and out.is_file(), err
+    assert code == 0 and read == [0, 0, 1, 2] and out.is_file(), err    # (stop 53) frame 0 first shows the light
 
 
 def test_track_with_rigid_markers_named_in_the_rig_file(rig_clip, capsys, tmp_path):

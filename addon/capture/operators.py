@@ -122,7 +122,9 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         if small:
             self.messages.warning(small)
         return (f"frame {n}: {count} markers ({per_view[0]} direct, {per_view[1]} mirror 0, {per_view[2]} mirror 1; "
-                f"dots {dot_px_text(dot_px)} px across) shown as tracks of the clip's 'MirrorCap' object")
+                f"dots {dot_px_text(dot_px)} px across) shown as tracks of the clip's 'MirrorCap' object"
+                + (f"; light: {'ordinary' if light == 'normal' else 'UV'}, as the frame shows it" if s.light == "auto"
+                   else ""))
 
 
 class MIRRORCAP_OT_solve_mirrors(MirrorCapJobOperator):

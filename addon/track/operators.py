@@ -139,7 +139,8 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
         if tuple(clip.size) != tuple(camera.image_size):
             raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the "
                              f"clip is {clip.size[0]}x{clip.size[1]}")
-        rig, colors, _ = rig_and_colours(s, open_source(bpy.path.abspath(clip.filepath)))
+        video = input_path(s.video, what="rig video")          # Light at Auto: its first frame says
+        rig, colors, _ = rig_and_colours(s, open_source(video) if video else None)
         layout = rig.views
         rigid, rigid_source = rigid_from_settings(s, rig, colors)
         numbers, frames = clip_tracks_to_detections(clip, layout, self.tracking_object or None)

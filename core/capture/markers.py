@@ -136,12 +136,6 @@ class ColorClasses:
     def load(cls, path) -> "ColorClasses":
         return cls.from_dict(read_json(path, "colour file"), source=f"colour file {path}")
 
-    @classmethod
-    def load_or_default(cls, path, light: str | None = None) -> "ColorClasses":
-        """COLORS.json if a path is given, else the four default colours of the light (UV unless
-        ``light`` says); see :func:`capture_light` for which light a capture is under."""
-        return cls.load(path) if path else cls.default(light or "uv")
-
     def to_dict(self) -> dict:
         out = {"classes": [{"name": n, "samples": np.round(self.samples[self.labels == k] * 1000, 2).tolist()}
                            for k, n in enumerate(self.names)]}

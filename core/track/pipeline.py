@@ -101,7 +101,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
 
     _check_camera(camera, source)
     check_output_paths(output, report)
-    _check_known_length(known_length)
+    check_known_length(known_length)
     extraction = extraction or ExtractionSettings()
     t0 = time.perf_counter()
     stream = DetectionStream(source, colors or ColorClasses.default(extraction.light), extraction, layout,
@@ -131,7 +131,7 @@ def run_track(source: VideoSource, camera: Camera, output, *, report=None, color
                             video=source.compression(), between=washed, light=extraction.light)
 
 
-def _check_known_length(known_length) -> None:
+def check_known_length(known_length) -> None:
     """``(label, label, mm)``: a positive length, refused before any work when not (the labels are known only once
     the take is tracked)."""
     if known_length is not None and not known_length[2] > 0:
@@ -178,7 +178,7 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     from .selfcal import self_calibrate_mirror
 
     check_output_paths(output, report)
-    _check_known_length(known_length)
+    check_known_length(known_length)
     if len(frames) < 2:
         raise InputError("tracking needs at least 2 frames")
     det = ClipDetections.of(frames, camera)  # the one normalisation of the clip's pixels
