@@ -168,7 +168,9 @@ stress-clips: $(STAMP)
 # (960x600, a skin of sRGB 125,85,65, 180 dots of 3 mm 680 mm away, mirrors at 42 deg, 60 frames; held out at stop
 # 42); blur540n (960x540, a medium skin, 200 dots of 3.2 mm, expressions 2.5x as fast, each frame blurred over a
 # 1/60 s shutter; held out at stop 47); touch576 (1024x576, a skin of sRGB 190,140,110, 220 dots of 2.8 mm, mirrors
-# at 44 deg, the mirrors' views touching the direct one; held out at stop 47, kept at stop 48). About 125 minutes.
+# at 44 deg, the mirrors' views touching the direct one; held out at stop 47, kept at stop 48); hv2 (1152x648, the dark
+# skin, 240 dots of 2.8 mm, mirrors at 45 and 41 deg, the head 5 mm off the axis, +-15 deg yaw; held out at stop 53,
+# kept as a known failure). About 135 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -207,6 +209,9 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 190,140,110 --out sample_scenes/normal/touch576 \
 		--size 1024 576 --focal 900 --markers 220 --marker-mm 2.8 --mirror-deg 44 --head-deg 10 12 5 --tempo 2 \
 		--frames 75 --seed 21 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin dark --out sample_scenes/normal/hv2 --size 1152 648 \
+		--markers 240 --marker-mm 2.8 --mirror-deg 45 41 --head-deg 8 15 4 --head-offset -5 4 --tempo 1.3 \
+		--frames 90 --samples 4 --seed 3434 --no-scan
 
 # Stress clips with an object passed in front of the face (stop 46): a dark sphere -- a hand or a microphone under
 # black light -- swept sideways before the lower face (sample_scenes/occlude_clip.py), hiding the mouth's dots from

@@ -832,3 +832,20 @@ def test_a_shadow_of_the_skins_hue_beside_a_dot_does_not_move_it():
     # and 408 px in area, the dot 81 px alone
     assert near.min() < 1.2 and det.color[int(np.argmin(near))] == ColorClasses.default("normal").names.index("blue")
     assert det.area[int(np.argmin(near))] < 200 and len(det.x) == 1   # and the shadow is no dot
+
+
+def test_hv2_dots_paired_with_other_dots_images_at_a_mirrors_silhouette_a_known_failure(tmp_path, capsys):
+    """#18, stop 53: hv2 (held out, tuned on by nothing: the dark skin, 1152x648, 240 dots of 2.8 mm, mirrors at 45
+    and 41 deg, the head 5 mm off the axis, +-15 deg yaw), tracked as a user runs it with no --light (the first frame
+    says ordinary light). A known failure, pinned here so that it gets no worse: two brow dots at one image height,
+    hidden from both mirrors, took images at the mirror views' silhouettes -- one the other dot's grazing image
+    (1.4 px off its projection, 0.9 px off its own line against 0.6 px off the wrong dot's), the other an image where
+    two dots project within 0.02 px of each other -- 8-9 mm off along their rays from the first frames, as did a chin
+    dot: 24 identity switches, 169 points over 2 mm, one split label (README, "Known failures")."""
+    out = _tracked("hv2", tmp_path, capsys)
+    assert "light: ordinary (coloured dots), as frame 0 shows it" in out
+    s, _, _ = scored_take(ROOT / "sample_scenes" / "normal" / "hv2", tmp_path / "hv2.c3d", tmp_path / "hv2.json")
+    err_mm = s["error_mm"][:, s["ids"] >= 0]
+    assert s["identity_switches"] <= 24 and s["split_markers"] <= 1
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 169
+    assert s["seen_reported_fraction"] > 0.97 and s["rms_mm"] < 0.9
