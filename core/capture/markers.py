@@ -174,7 +174,7 @@ class ColorClasses:
 #: under black light only the dots glow and the face and the room stay dark; under ordinary lamps the face is lit.
 #: The share of a frame's pixels whose brightest channel exceeds :data:`LIT_VALUE` (the UV extractor's default
 #: threshold: what it would take for dots) tells them apart -- measured on the first frames of the project's clips
-#: (stop 53): 0.9-2.0 % on the 30 UV clips, 15-43 % on the 18 normal-light ones, whatever their skin or compression
+#: (stop 53): 0.9-2.0 % on the 30 UV clips, 15-43 % on the 19 normal-light ones, whatever their skin or compression
 LIT_VALUE = 60
 #: ... above this share, the capture is under ordinary light (a UV frame this lit would swamp the UV extractor)
 LIT_SHARE = 0.06
