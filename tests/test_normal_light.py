@@ -60,8 +60,9 @@ def _projections(truth, camera, f):
 
 
 def test_the_light_is_read_from_the_first_frame(tmp_path, capsys):
-    """Stop 53: with no --light and no colour file saying, the first frame tells the light -- every committed clip
-    (30 UV, 19 normal-light: skins, compressions, blur, small dots) as its clip.json says it was rendered. Then as a
+    """Stop 53: with no --light and no colour file saying, the first frame's centre tells the light -- every committed
+    clip (30 UV, 19 normal-light: skins, compressions, blur, small dots) as its clip.json says it was rendered, with a
+    margin of 2x both ways; a lit backdrop around a UV face does not change it. Then as a
     user runs it: `detect` and `colors learn` on the light-skin clip with no --light say and use normal light (a
     hs4-like clip was refused with "cannot split the direct and mirror views" before); on a UV clip, UV; a colour
     file's light is taken without a word."""
@@ -76,6 +77,11 @@ def test_the_light_is_read_from_the_first_frame(tmp_path, capsys):
         shares[light].append(lit_share(frame))
     assert len(shares["uv"]) >= 28 and len(shares["normal"]) >= 18
     assert max(shares["uv"]) < LIT_SHARE / 2 and min(shares["normal"]) > 2 * LIT_SHARE    # a margin both ways
+    uv_frame = next(iter(open_source(ROOT / "sample_scenes" / "stress" / "sparse" / "clip.mp4").frames(0, 1)))[1].copy()
+    h, w = uv_frame.shape[:2]
+    uv_frame[:, : w // 4] = (255, 120, 150)           # a backdrop glowing under the lamps, beside the left mirror ...
+    uv_frame[: h // 5] = (255, 255, 255)              # ... and above the head: 40 % of the frame
+    assert light_of_frame(uv_frame) == "uv"
     code, out, err = _run(["detect", CLIPS["light"] / "clip.mp4", "--frames", "0:3", "-o", tmp_path / "d.csv"], capsys)
     assert code == 0, err
     assert "light: ordinary (coloured dots), as frame 0 shows it (--light uv to say otherwise)" in out

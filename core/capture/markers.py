@@ -171,22 +171,30 @@ class ColorClasses:
         return best, np.degrees(diff[np.arange(len(hue)), best]) if diff.size else np.zeros(0), sat
 
 
-#: under black light only the dots glow and the face and the room stay dark; under ordinary lamps the face is lit.
-#: The share of a frame's pixels whose brightest channel exceeds :data:`LIT_VALUE` (the UV extractor's default
-#: threshold: what it would take for dots) tells them apart -- measured on the first frames of the project's clips
-#: (stop 53): 0.9-2.0 % on the 30 UV clips, 15-43 % on the 19 normal-light ones, whatever their skin or compression
+#: under black light only the dots glow and the face stays dark; under ordinary lamps the face is lit. The share of
+#: the frame's centre -- the middle fifth of its width, the middle two fifths of its height: the direct view's face, by
+#: the rig's design, whatever the backdrop or a mirror's frame -- whose brightest channel exceeds :data:`LIT_VALUE`
+#: (the UV extractor's default threshold: what it would take for dots) tells them apart. Measured on the first frames
+#: of the project's clips (stop 53): 2.7-6.6 % on the 30 UV clips, 93-100 % on the 19 normal-light ones, whatever
+#: their skin or compression (the whole frame's share: 0.9-2.5 % against 15-43 %, where a glowing backdrop or a
+#: saturated one would count)
 LIT_VALUE = 60
-#: ... above this share, the capture is under ordinary light (a UV frame this lit would swamp the UV extractor)
-LIT_SHARE = 0.06
+#: ... above this share of the centre, the capture is under ordinary light
+LIT_SHARE = 0.3
 
 
 def lit_share(image) -> float:
-    """The share of ``image``'s pixels (BGR, 8-bit) whose brightest channel exceeds :data:`LIT_VALUE`."""
-    return float(np.mean(np.asarray(image).max(axis=2) > LIT_VALUE))
+    """The share of ``image``'s centre (BGR, 8-bit; :data:`LIT_SHARE`) whose brightest channel exceeds
+    :data:`LIT_VALUE`."""
+    image = np.asarray(image)
+    h, w = image.shape[:2]
+    centre = image[int(0.3 * h):int(0.7 * h) + 1, int(0.4 * w):int(0.6 * w) + 1]
+    return float(np.mean(centre.max(axis=2) > LIT_VALUE))
 
 
 def light_of_frame(image) -> str:
-    """``"normal"`` when more than :data:`LIT_SHARE` of ``image`` is lit (:func:`lit_share`), else ``"uv"``."""
+    """``"normal"`` when more than :data:`LIT_SHARE` of ``image``'s centre is lit (:func:`lit_share`), else
+    ``"uv"``."""
     return "normal" if lit_share(image) > LIT_SHARE else "uv"
 
 
