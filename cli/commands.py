@@ -94,11 +94,11 @@ def calibrate(args) -> int:
 def _colours_and_light(args, source=None, start: int = 0):
     """The capture's colour classes and light from ``--colors`` and ``--light``; with neither saying the light,
     frame ``start`` of ``source`` shows it (:func:`core.capture.markers.capture_light`), and a line says so."""
-    from ..core.capture.markers import ColorClasses, capture_light
+    from ..core.capture.markers import ColorClasses, capture_light, frame_says_light
 
     colors = ColorClasses.load(args.colors) if getattr(args, "colors", None) else None
     light = capture_light(args.light, colors, source, start)
-    if source is not None and args.light is None and not (colors and colors.light) and not args.quiet:
+    if source is not None and frame_says_light(args.light, colors) and not args.quiet:
         print(f"light: {'ordinary (coloured dots)' if light == 'normal' else 'UV'}, as frame {start} shows it "
               f"(--light {'uv' if light == 'normal' else 'normal'} to say otherwise)")
     return colors or ColorClasses.default(light), light

@@ -103,7 +103,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
         n = context.scene.frame_current - 1 if self.frame < 0 else self.frame
         n = min(max(n, 0), source.frame_count - 1)
         image = next(iter(source.frames(n, n + 1, 1)))[1]
-        rig, colors, light = rig_and_colours(s, source, n)
+        rig, colors, light, from_frame = rig_and_colours(s, source, n)
         settings = extraction_settings(s, light)
         det = marker_extractor(colors, settings)(image)
         between = det.between_count()       # washed-out dots: as a take would decide, from this one frame
@@ -123,7 +123,7 @@ class MIRRORCAP_OT_detect_markers(MirrorCapOperator):
             self.messages.warning(small)
         return (f"frame {n}: {count} markers ({per_view[0]} direct, {per_view[1]} mirror 0, {per_view[2]} mirror 1; "
                 f"dots {dot_px_text(dot_px)} px across) shown as tracks of the clip's 'MirrorCap' object"
-                + (f"; light: {'ordinary' if light == 'normal' else 'UV'}, as the frame shows it" if s.light == "auto"
+                + (f"; light: {'ordinary' if light == 'normal' else 'UV'}, as the frame shows it" if from_frame
                    else ""))
 
 

@@ -54,15 +54,17 @@ def head_object_from(context, name: str):
 
 def rig_and_colours(s, source=None, start: int = 0):
     """The scene's rig file (RIG.json: views and rigid markers), colour classes (COLORS.json, else the four
-    colours of the light) and light (the scene's Light; Auto: what COLORS.json says, else what frame ``start`` of
-    the rig video ``source`` shows, else UV: :func:`...core.capture.markers.capture_light`), each read once."""
-    from ...core.capture.markers import ColorClasses, capture_light
+    colours of the light), light (the scene's Light; Auto: what COLORS.json says, else what frame ``start`` of
+    the rig video ``source`` shows, else UV: :func:`...core.capture.markers.capture_light`) and whether the frame
+    said it, each read once."""
+    from ...core.capture.markers import ColorClasses, capture_light, frame_says_light
     from ...core.capture.rig import load_rig
 
     rig = load_rig(input_path(s.rig, what="rig file") if s.rig else None)
     colours = ColorClasses.load(input_path(s.colors, what="colour file")) if s.colors else None
-    light = capture_light(None if s.light == "auto" else s.light, colours, source, start)
-    return rig, colours or ColorClasses.default(light), light
+    said = None if s.light == "auto" else s.light
+    light = capture_light(said, colours, source, start)
+    return rig, colours or ColorClasses.default(light), light, source is not None and frame_says_light(said, colours)
 
 
 def extraction_settings(s, light: str):

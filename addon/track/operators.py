@@ -87,7 +87,7 @@ class MIRRORCAP_OT_track(_TrackInputs, MirrorCapJobOperator):
 
         s, camera, mirrors, take = self._common(context)
         source = open_source(required(input_path(self.video, s.video, what="rig video"), "rig video"))
-        rig, colors, light = rig_and_colours(s, source, s.frame_start)
+        rig, colors, light, _ = rig_and_colours(s, source, s.frame_start)
         layout = rig.views
         rigid, rigid_source = rigid_from_settings(s, rig, colors)
         seeds = None
@@ -140,7 +140,7 @@ class MIRRORCAP_OT_track_clip_tracks(_TrackInputs, MirrorCapJobOperator):
             raise InputError(f"the camera file is for {camera.image_size[0]}x{camera.image_size[1]} images but the "
                              f"clip is {clip.size[0]}x{clip.size[1]}")
         video = input_path(s.video, what="rig video")          # Light at Auto: its first frame says
-        rig, colors, _ = rig_and_colours(s, open_source(video) if video else None)
+        rig, colors, _, _ = rig_and_colours(s, open_source(video) if video else None)
         layout = rig.views
         rigid, rigid_source = rigid_from_settings(s, rig, colors)
         numbers, frames = clip_tracks_to_detections(clip, layout, self.tracking_object or None)

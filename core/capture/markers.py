@@ -206,11 +206,17 @@ def capture_light(light: str | None, colors: "ColorClasses | None" = None, sourc
         raise InputError(f"light must be one of {', '.join(LIGHTS)}, not {light!r}")
     if colors is not None and colors.light and light and colors.light != light:
         raise InputError(f"the colour classes are for {colors.light} light but the capture is under {light} light")
-    if light or (colors is not None and colors.light):
+    if not frame_says_light(light, colors):
         return light or colors.light
     if source is None:
         return "uv"
     return light_of_frame(next(iter(source.frames(start, start + 1)))[1])
+
+
+def frame_says_light(light: str | None, colors: "ColorClasses | None" = None) -> bool:
+    """Does the video's frame decide the light (:func:`capture_light`): neither the user (``light``) nor the
+    colour file says it?"""
+    return not light and not (colors is not None and colors.light)
 
 
 #: :attr:`ExtractionSettings.washed_out`'s values
