@@ -595,19 +595,20 @@ def test_a_dot_the_final_pass_lost_at_a_fast_peak_is_followed_on(tmp_path, capsy
     assert sum(report["per_frame"]["bridged"]) > 0
 
 
-def test_a_label_off_the_face_on_another_labels_mirror_track_is_undone(tmp_path, capsys):
-    """#18, stop 52, hr2 (rendered after stop 52's follow-on, the mirror images touching the face): two forehead dots
+def test_a_dot_hidden_from_a_mirror_keeps_no_grazing_image_of_a_like_dot(tmp_path, capsys):
+    """#18, hr2 (rendered after stop 52's follow-on, the mirror images touching the face): two forehead dots
     seen only directly paired with like dots' grazing mirror-1 images from the first frames; the images' own dots
-    took them in other frames. Of two labels on one mirror track, the one off the face while the other lies on it
-    is now undone there (``onface.off_face_on_shared_tracks``): one of the two (22 mm off the face) goes, and with
-    it the split label and 36 points over 2 mm (91 -> 63 identity switches). The other, 5 mm off the face along a
-    grazing ray, stays: the README's lead."""
+    took them in other frames. Stop 52: of two labels on one mirror track, the one off the face while the other lies
+    on it is undone there (``onface.off_face_on_shared_tracks``): one of the two (22 mm off the face) went, and with
+    it the split label (91 -> 63 identity switches, 99 -> 63 points over 2 mm). The other, 5 mm off the face along a
+    grazing ray, stayed. Stop 53: an image whose pairing over the clip holds in the band less than a like dot's,
+    paired nowhere in that mirror, goes to neither (``initial._doubt_near_rivals``; that dot's image: 75 of 90
+    frames against its own dot's 85): no identity switch and no point over 2 mm left."""
     s, report, _ = _tracked_stress_clip("hr2", tmp_path, capsys)
-    assert s["split_markers"] == 0 and s["identity_switches"] <= 63
+    assert s["split_markers"] == 0 and s["identity_switches"] == 0
     err_mm = s["error_mm"][:, s["ids"] >= 0]
-    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 63
-    assert report["per_frame"]["released_blobs"][0] >= 28
-    assert s["seen_reported_fraction"] > 0.98
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 2 and s["rms_mm"] < 0.25
+    assert s["seen_reported_fraction"] > 0.985
 
 
 @pytest.mark.parametrize("name, reported, over_2mm, switches", [("fast540", 0.97, 5, 0), ("lip648", 0.985, 2, 0)])

@@ -1,9 +1,10 @@
 """The neutral structure (Lin 2003, the motion tracking procedure, step 2): markers are direct-view 2D
 tracks paired with mirror tracks over the first frames (:mod:`.pairing`); a mirror image that two like dots on its
 line contest goes to the one the other mirror confirms, else to the one whose pairing with it holds over the whole
-clip (:func:`_settle_contests`); a direct track left unpaired is paired in a wider band when both mirrors put it at
-the same 3D point (:func:`_confirm_by_both_mirrors`); the tracks paired in no mirror are reported
-(:func:`undecided_tracks`)."""
+clip (:func:`_settle_contests`); an image whose pairing holds over the clip less than a like dot's paired nowhere in
+that mirror goes to neither (:func:`_doubt_near_rivals`); a direct track left unpaired is paired in a wider band when
+both mirrors put it at the same 3D point (:func:`_confirm_by_both_mirrors`); the tracks paired in no mirror are
+reported (:func:`undecided_tracks`)."""
 
 from __future__ import annotations
 
@@ -188,6 +189,45 @@ def _settle_by_clip_support(contested, support, shared, mirror: int, partner) ->
         partner[mirror, dot[i]] = image[i]
 
 
+def _doubt_near_rivals(det: ClipDetections, camera, normals, dids, partner, wide_qualifying, mids_all,
+                       band_px: float):
+    """A mirror image paired over the first frames with one dot (``partner``) that another dot of its colour, paired
+    in that mirror with nothing, also keeps in a wider band there (``wide_qualifying``: per mirror, the pairs of
+    :func:`.pairing.paired_tracks` in the wide band) is taken from its dot when, over the whole clip
+    (:func:`.pairing.clip_band_support`), the rival's pairing holds in the band in :data:`CLIP_SUPPORT_SHARE` of the
+    frames both are seen and its own does not: the image then goes to neither. A dot hidden from a mirror pairs
+    with a like dot's grazing image on its line, whose centroid, biased by the face's edge, sits nearer the wrong
+    dot's line than its own over the first frames (hr2: 0.2 px against 0.9, so its own dot's pairing failed the RMS
+    test); over the clip its own dot's line keeps it (85 of 90 frames) and the wrong one's slides off (75 of 90).
+    Neither is given the image: which dot it shows stays unsure (on dense rigs two dots' lines both keep one image
+    over the whole clip, the first frames' choice right), and the image's dot comes back later where the late
+    markers' tests allow."""
+    partner = partner.copy()
+    direct_clip_track = None
+    for k in range(len(normals)):
+        q = np.asarray(wide_qualifying[k], int).reshape(-1, 2)
+        paired = np.flatnonzero(partner[k] >= 0)
+        if q.size == 0 or paired.size == 0:
+            continue
+        owner = np.full(int(max(q[:, 1].max(), partner[k].max())) + 1, -1)
+        owner[partner[k, paired]] = paired
+        rival = q[(owner[q[:, 1]] >= 0) & (owner[q[:, 1]] != q[:, 0]) & (partner[k, q[:, 0]] < 0)]
+        if rival.size == 0:
+            continue
+        if direct_clip_track is None:
+            direct_clip_track = _clip_track_of(det, 0, dids)
+        pairs = np.unique(np.r_[np.c_[owner[rival[:, 1]], rival[:, 1]], rival], axis=0)   # (dot, image): owners, rivals
+        support, shared = clip_band_support(det, camera, normals[k], k, direct_clip_track[pairs[:, 0]],
+                                            _clip_track_of(det, k + 1, mids_all[k])[pairs[:, 1]], band_px)
+        holds = (support > 0) & (support >= CLIP_SUPPORT_SHARE * shared)
+        is_owner = owner[pairs[:, 1]] == pairs[:, 0]
+        rival_holds = np.zeros(owner.size, bool)
+        rival_holds[pairs[holds & ~is_owner, 1]] = True
+        doubted = pairs[is_owner & ~holds & rival_holds[pairs[:, 1]], 1]
+        partner[k, owner[doubted]] = -1
+    return partner
+
+
 def _confirm_by_both_mirrors(det: ClipDetections, normals, ds, dids, n_dt, partner, wide, mids_all,
                              factor: float = 3.0, floor_mm: float = 0.5):
     """Direct tracks with no partner in any mirror (a marker on the face's midline is seen at a
@@ -229,8 +269,11 @@ def initial_markers(det: ClipDetections, camera, normals, ds, settings, seeds=No
     partner = _settle_contests(det, init, camera, normals, ds, dids, n_dt, partner, detail, mids_all,
                                settings.band_px)
     if settings.wide_band_factor > 1.0 and len(normals) == 2:
+        wide_detail = {}
         wide = paired_tracks(init, camera, normals, settings.wide_band_factor * settings.band_px, min(5, W),
-                             max_rms_factor=np.inf, tracks=(dids, n_dt, mids_all))[2]
+                             max_rms_factor=np.inf, tracks=(dids, n_dt, mids_all), detail=wide_detail)[2]
+        partner = _doubt_near_rivals(det, camera, normals, dids, partner, wide_detail["qualifying"], mids_all,
+                                     settings.band_px)
         partner = _confirm_by_both_mirrors(init, normals, ds, dids, n_dt, partner, wide, mids_all)
     named = {}
     if seeds is not None:                  # the user's designations win over the automatic pairing
