@@ -182,11 +182,17 @@ def _settle_by_clip_support(contested, support, shared, mirror: int, partner) ->
     first = np.flatnonzero(np.r_[True, image[1:] != image[:-1]])      # each image's best supported contender
     contenders = np.diff(np.r_[first, image.size])
     runner_up = support[np.minimum(first + 1, image.size - 1)]
-    clear = ((contenders > 1) & (support[first] > 0) & (support[first] >= CLIP_SUPPORT_SHARE * shared[first])
+    clear = ((contenders > 1) & _holds_over_clip(support[first], shared[first])
              & (support[first] >= CLIP_SUPPORT_RATIO * runner_up))
     for i in first[clear]:
         partner[mirror][partner[mirror] == image[i]] = -1
         partner[mirror, dot[i]] = image[i]
+
+
+def _holds_over_clip(support, shared) -> np.ndarray:
+    """Does a pairing hold in the band over the clip: in at least :data:`CLIP_SUPPORT_SHARE` of the ``shared``
+    frames both its tracks are seen (``support``: the frames in the band, :func:`.pairing.clip_band_support`)?"""
+    return (support > 0) & (support >= CLIP_SUPPORT_SHARE * shared)
 
 
 def _doubt_near_rivals(det: ClipDetections, camera, normals, dids, partner, wide_qualifying, mids_all,
@@ -219,7 +225,7 @@ def _doubt_near_rivals(det: ClipDetections, camera, normals, dids, partner, wide
         pairs = np.unique(np.r_[np.c_[owner[rival[:, 1]], rival[:, 1]], rival], axis=0)   # (dot, image): owners, rivals
         support, shared = clip_band_support(det, camera, normals[k], k, direct_clip_track[pairs[:, 0]],
                                             _clip_track_of(det, k + 1, mids_all[k])[pairs[:, 1]], band_px)
-        holds = (support > 0) & (support >= CLIP_SUPPORT_SHARE * shared)
+        holds = _holds_over_clip(support, shared)
         is_owner = owner[pairs[:, 1]] == pairs[:, 0]
         rival_holds = np.zeros(owner.size, bool)
         rival_holds[pairs[holds & ~is_owner, 1]] = True
