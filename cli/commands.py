@@ -146,7 +146,6 @@ def track(args) -> int:
     from ..core.capture.rig import load_rig, rigid_markers
     from ..core.geometry.camera import Camera
     from ..core.capture.video import check_frame_step
-    from ..core.common.files import check_output_paths
     from ..core.track.pipeline import check_known_length, run_track
     from ..core.track.seeds import read_seeds
     from ..core.track.tracker import TrackSettings
@@ -162,8 +161,7 @@ def track(args) -> int:
         raise MirrorCapError("--conjecture-limit must be a number of millimetres, 0 or more (or inf)")
     settings = TrackSettings.with_conjecture_limit(args.conjecture_limit)
     seeds = read_seeds(args.seeds, camera.image_size) if args.seeds else None
-    check_output_paths(Path(args.output), Path(args.report) if args.report else None)  # refused before any frame
-    check_frame_step(args.step)                                                         # is read (the light's)
+    check_frame_step(args.step)      # refused before any frame is read (the light's), as the outputs are (main)
     check_known_length(known)
     colors, light = _colours_and_light(args, source, start)
     rigid, rigid_source = rigid_markers((0, 0, 0, 0), (), rig, colors)

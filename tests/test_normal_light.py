@@ -843,15 +843,18 @@ def test_a_shadow_of_the_skins_hue_beside_a_dot_does_not_move_it():
 def test_hv2_dots_paired_with_other_dots_images_at_a_mirrors_silhouette_a_known_failure(tmp_path, capsys):
     """#18, stop 53: hv2 (held out, tuned on by nothing: the dark skin, 1152x648, 240 dots of 2.8 mm, mirrors at 45
     and 41 deg, the head 5 mm off the axis, +-15 deg yaw), tracked as a user runs it with no --light (the first frame
-    says ordinary light). A known failure, pinned here so that it gets no worse: two brow dots at one image height,
-    hidden from both mirrors, took images at the mirror views' silhouettes -- one the other dot's grazing image
-    (1.4 px off its projection, 0.9 px off its own line against 0.6 px off the wrong dot's), the other an image where
-    two dots project within 0.02 px of each other -- 8-9 mm off along their rays from the first frames, as did a chin
-    dot: 24 identity switches, 169 points over 2 mm, one split label (README, "Known failures")."""
+    says ordinary light). Two brow dots at one image height, each hidden from the mirror across, took each the
+    other's image (the band cannot tell: both lie on one line of each mirror), 8-9 mm off along their rays from the
+    first frames: 169 points over 2 mm, one split label. Stop 54: a crossing against the face's convexity is
+    swapped (``initial._settle_crossed_pairs``): both brow dots within 2 mm in every frame. Still a known failure,
+    pinned so that it gets no worse: a chin dot 6-11 mm off for 45 frames and a dot drifting 4 mm at a mirror's
+    silhouette -- 24 identity switches, 86 points over 2 mm (README, "Known failures")."""
     out = _tracked("hv2", tmp_path, capsys)
     assert "light: ordinary (coloured dots), as frame 0 shows it" in out
     s, _, _ = scored_take(ROOT / "sample_scenes" / "normal" / "hv2", tmp_path / "hv2.c3d", tmp_path / "hv2.json")
+    brow = s["error_mm"][:, np.isin(s["ids"], [52, 53])]
+    assert brow.shape[1] == 2 and np.nanmax(brow) < 2.0
     err_mm = s["error_mm"][:, s["ids"] >= 0]
-    assert s["identity_switches"] <= 24 and s["split_markers"] <= 1
-    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 169
-    assert s["seen_reported_fraction"] > 0.97 and s["rms_mm"] < 0.9
+    assert s["identity_switches"] <= 24 and s["split_markers"] == 0
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 86
+    assert s["seen_reported_fraction"] > 0.97 and s["rms_mm"] < 0.65

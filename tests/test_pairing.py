@@ -280,3 +280,52 @@ def test_a_contested_image_the_other_mirror_cannot_settle_goes_to_the_dot_that_s
     assert settled(0.3) == (True, False)                          # the rival slides off the line: settled
     assert settled(0.0) == (False, True)                          # the rival stays on it: the assignment stands
     assert settled(0.3, image_noise_px=1.5) == (False, True)      # the image's own dot leaves the band too often
+
+
+def test_two_dots_paired_crosswise_against_the_faces_convexity_are_settled(rig):
+    """#18, stop 54: hv2 (held out): two brow dots at one height, each seen only in the mirror on its side, paired
+    each with the other's image -- both lie on one line of each mirror, so the band cannot tell. Of two such dots
+    the one nearer a mirror's side is the one that mirror sees. A crossing the other way is settled
+    (``initial._settle_crossed_pairs``): the pairs swapped when neither dot is seen at one 3D point through both
+    images; both images to the one dot that is; left alone when it lies the convex way."""
+    from mirrorcap.core.capture.views import FrameDets
+    from mirrorcap.core.geometry.mirror import reflect_points
+    from mirrorcap.core.track.initial import _settle_crossed_pairs
+    from mirrorcap.core.track.pairing import paired_tracks
+
+    normals = np.stack([np.asarray(n, float) for n, _ in rig.planes])
+    ds = np.array([d for _, d in rig.planes])
+    side0 = np.sign(ds[0] * normals[0, 0])                   # mirror 0's side of the view: -1, the left
+    grid = np.array([[x, y, 600.0 + 0.01 * x * x] for x in (-40.0, -20.0, 20.0, 40.0) for y in (-30.0, 30.0)])
+    dots = np.r_[grid, [[-side0 * 15.0, 0.0, 590.0], [side0 * 15.0, 0.0, 590.0]]]   # a: farther from mirror 0
+
+    frames = []
+    for f in range(15):
+        at = dots + np.array([0.3 * f, 0.1 * f, 0.0])
+        images = [rig.camera.project(reflect_points(at, *rig.planes[k])) for k in range(2)]
+        frames.append(FrameDets(rig.camera.project(at), np.zeros(len(at), int), images,
+                                [np.zeros(len(at), int)] * 2))
+    det = ClipDetections.from_frames(frames, rig.camera)
+    dids, n_dt, _, mids, _, _ = paired_tracks(det, rig.camera, normals, 1.0, 5)
+    direct = np.asarray(dids[0], int)                        # frame 0's blobs are in the order of `dots`
+    image = [np.asarray(mids[k][0], int) for k in range(2)]
+    a, b = direct[-2], direct[-1]
+    own = np.full((2, n_dt), -1)
+    own[:, direct] = np.stack(image)                         # every dot with its own images
+
+    def settled(a_in_0, b_in_1, convex=False):
+        partner = own.copy()
+        partner[:, [a, b]] = -1
+        first, second = (b, a) if convex else (a, b)         # the convex way: the nearer dot has mirror 0's image
+        partner[0, first], partner[1, second] = a_in_0, b_in_1
+        qualifying = [np.array([[first, a_in_0], [second, a_in_0]]), np.array([[second, b_in_1], [first, b_in_1]])]
+        out = _settle_crossed_pairs(det, normals, ds, dids, n_dt, partner, qualifying, mids)
+        return out[:, a].tolist(), out[:, b].tolist(), out[:, direct[:-2]].tolist() == own[:, direct[:-2]].tolist()
+
+    ia, ib, ja, jb = image[0][-2], image[0][-1], image[1][-2], image[1][-1]
+    # each with the other's image: swapped, each then with its own
+    assert settled(ib, ja) == ([-1, ja], [ib, -1], True)
+    # b took a's mirror-1 image, a has both of its own: a keeps both, b none
+    assert settled(ia, ja) == ([ia, ja], [-1, -1], True)
+    # the same pairs lying the convex way (b, the dot nearer mirror 0, in mirror 0): left as they are
+    assert settled(ib, ja, convex=True) == ([-1, ja], [ib, -1], True)
