@@ -322,7 +322,7 @@ def test_two_dots_paired_crosswise_against_the_faces_convexity_are_settled(rig):
         out = _settle_crossed_pairs(det, normals, ds, dids, n_dt, partner, qualifying, mids)
         return out[:, a].tolist(), out[:, b].tolist(), out[:, direct[:-2]].tolist() == own[:, direct[:-2]].tolist()
 
-    ia, ib, ja, jb = image[0][-2], image[0][-1], image[1][-2], image[1][-1]
+    ia, ib, ja = image[0][-2], image[0][-1], image[1][-2]
     # each with the other's image: swapped, each then with its own
     assert settled(ib, ja) == ([-1, ja], [ib, -1], True)
     # b took a's mirror-1 image, a has both of its own: a keeps both, b none
