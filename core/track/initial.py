@@ -246,11 +246,12 @@ def _settle_crossed_pairs(init: ClipDetections, normals, ds, dids, n_dt, partner
     half the direct view's typical blob spacing, is wrong, and is settled so: when exactly one of the two dots is
     seen through ``i`` and ``j`` at one 3D point (:func:`_mirrors_spread` within :func:`_agreement_limit`), they are
     both its images and the other dot keeps none; when neither is, the pairs are swapped; when both are, or too few
-    markers are paired in both mirrors to tell, neither dot keeps an image. Measured on the 48 committed clips'
-    first frames (both pairings right in 25 crossings, all the convex way; the 3 the other way all wrong): hv2's two
-    brow dots at one height, each hidden from the mirror across, had each the other's image (8-9 mm off; swapped,
-    both right); umber600 at CRF 23, with fewer than 3 markers paired in both mirrors, gave a dot's mirror-0 image
-    to a dot at its height and kept its mirror-1 one (neither keeps one now)."""
+    markers are paired in both mirrors to tell, neither dot keeps an image (a dot crossed with two is left as it
+    is). Measured on the 48 committed clips' first frames (both pairings right in 25 crossings, all the convex way;
+    the 3 the other way all wrong): hv2's two brow dots at one height, each hidden from the mirror across, had each
+    the other's image (8-9 mm off; swapped, both right); umber600 at CRF 23, with fewer than 3 markers paired in
+    both mirrors, gave a dot's mirror-0 image to a dot at its height and kept its mirror-1 one (neither keeps one
+    now)."""
     side = np.sign(np.asarray(ds, float) * np.asarray(normals, float)[:, 0])   # x of the planes' nearest points
     ids = np.concatenate([np.asarray(d, int) for d in dids]) if len(dids) else np.zeros(0, int)
     single = [(partner[k] >= 0) & (partner[1 - k] < 0) for k in range(2)]
@@ -281,8 +282,8 @@ def _settle_crossed_pairs(init: ClipDetections, normals, ds, dids, n_dt, partner
     partner[:, a], partner[:, b] = -1, -1
     swap = ~a_one & ~b_one
     partner[0, b[swap]], partner[1, a[swap]] = i[swap], j[swap]
-    partner[0, a[a_one & ~b_one]], partner[1, a[a_one & ~b_one]] = i[a_one & ~b_one], j[a_one & ~b_one]
-    partner[0, b[b_one & ~a_one]], partner[1, b[b_one & ~a_one]] = i[b_one & ~a_one], j[b_one & ~a_one]
+    for dot, keeps in ((a, a_one & ~b_one), (b, b_one & ~a_one)):       # both images to the one dot they show
+        partner[0, dot[keeps]], partner[1, dot[keeps]] = i[keeps], j[keeps]
     return partner
 
 
