@@ -184,8 +184,8 @@ LIT_SHARE = 0.3
 
 
 def lit_share(image) -> float:
-    """The share of the centre of ``image`` (BGR, 8-bit; the middle fifth of its width, two fifths of its height:
-    :data:`LIT_VALUE`) whose brightest channel exceeds :data:`LIT_VALUE`."""
+    """The share of the centre of ``image`` (BGR, 8-bit; the middle fifth of its width, two fifths of its height: the
+    direct view's face) whose brightest channel exceeds :data:`LIT_VALUE`."""
     image = np.asarray(image)
     h, w = image.shape[:2]
     centre = image[int(0.3 * h):int(0.7 * h) + 1, int(0.4 * w):int(0.6 * w) + 1]
