@@ -50,6 +50,8 @@ from __future__ import annotations
 
 import json
 import time
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from ..capture.markers import ColorClasses, ExtractionSettings
@@ -187,7 +189,9 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
         if any(np.any(first.counts(k + 1) < 6) for k in range(2)):
             raise DegenerateError("a mirror shows fewer than 6 markers in the first frames: are both mirrors "
                                   "visible? (give MIRRORS.json from `mirrorcap mirrors` otherwise)")
-        cals = [self_calibrate_mirror(first, camera, k) for k in range(2)]
+        # the two mirrors' searches are independent and their array work releases the GIL: one thread each
+        with ThreadPoolExecutor(2, thread_name_prefix="mirrorcap-selfcal") as pool:
+            cals = list(pool.map(lambda k: self_calibrate_mirror(first, camera, k), range(2)))
         normals = np.stack([c.plane.normal for c in cals])
         both = both_mirror_samples(det, camera, normals)
         ds, scale_link = link_self_calibrated_scales(both, det, camera, normals, [c.plane.d for c in cals])
