@@ -353,6 +353,9 @@ def test_labels_on_one_pair_of_2d_tracks_are_one_marker():
         candidate[frames, label] = cand(3)[frames]
     take = _labelled_take(measured, neutral, candidate)
     assert _shared_track_pairs(take, dtrack, mtrack) == [(0, 1)]
+    # on the direct tracks alone (merge_split_labels' looser test): 0 and 1 share slot 0's, 2 and 3 are measured
+    # together, 4-6 are three on one
+    assert _shared_track_pairs(take, dtrack) == [(0, 1)]
     merged = merge_along_2d_tracks(take, (dtrack, mtrack))
     assert merged.labels[:3] == ["m000", "m002", "m003"]                          # 1 went into 0; 2, 3 stay
     assert np.array_equal(merged.assigned_blob[:, 0] >= 0, np.ones(F, bool))     # the dot in every frame

