@@ -61,7 +61,7 @@ def _projections(truth, camera, f):
 
 def test_the_light_is_read_from_the_first_frame(tmp_path, capsys):
     """Stop 53: with no --light and no colour file saying, the first frame's centre tells the light -- every committed
-    clip (30 UV, 19 normal-light: skins, compressions, blur, small dots) as its clip.json says it was rendered, with a
+    clip (30 UV, 20 normal-light: skins, compressions, blur, small dots) as its clip.json says it was rendered, with a
     margin of 2x both ways; a lit backdrop around a UV face does not change it. Then as a
     user runs it: `detect` and `colors learn` on the light-skin clip with no --light say and use normal light (a
     hs4-like clip was refused with "cannot split the direct and mirror views" before); on a UV clip, UV; a colour

@@ -27,9 +27,9 @@ under either light). A frame's extraction releases the GIL in most of its time (
 its pixels), and the video's decoder runs on threads of its own beside them. Under UV light one thread is as fast:
 a 1280x720 frame's extraction (about 3.5 ms) is little more than its decoding, which already keeps the second core
 busy. Self-calibration (``core.track.pipeline.track_detections``) searches the two mirrors' planes at once, a thread
-each: their batched array work releases the GIL (the 600-frame bench clip's two searches, measured alone while a
-render kept a core busy: 1.5-2.1 s one after the other, 1.2-1.3 s at once). The clip's 2D tracks do not: their three
-views' linking took 1.2-1.3 s on three threads against 0.8 s in one.
+each: their batched array work releases the GIL (the 600-frame bench clip's two searches, measured alone on the idle
+machine: 1.13-1.22 s one after the other, 0.65-0.72 s at once). The clip's 2D tracks do not: their three views'
+linking, measured while a render kept a core busy, took 1.2-1.3 s on three threads against 0.8 s in one.
 """
 
 from __future__ import annotations
