@@ -217,13 +217,13 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
 
 def _replaces_rival(nearer_mm: float, better_paired: bool) -> bool:
     """Does a late chain replace its rival on one direct 2D track (:func:`_rival`)? Yes when it lies
-    :data:`RIVAL_NEARER_MM` or more nearer the face along its ray than the rival (``nearer_mm``, the two
-    :func:`.onface.face_offset`'s difference; NaN: no), and when neither lies that much nearer and its pairing of 2D
-    tracks is the better supported (``better_paired``, :func:`.pairing.chain_pairing_support`). At a grazing angle the
-    face around a dot says little: hv2's chin dot, seen directly at a grazing angle and hidden from mirror 0, was
-    paired there with the image of a like dot the direct view does not see, 3.1 mm from the face against its own
-    pairing's 3.4 mm, and kept 6-11 mm off for 45 frames (24 identity switches); its own pairing with mirror 1 holds
-    over 78 chained frames against 62."""
+    :data:`RIVAL_NEARER_MM` or more nearer the face along its ray than the rival (``nearer_mm``: the rival's
+    :func:`.onface.face_offset` less the chain's; NaN: no), and also when neither lies that much nearer and the
+    chain's pairing of 2D tracks is the better supported (``better_paired``, :func:`.pairing.chain_pairing_support`).
+    At a grazing angle the face around a dot says little: hv2's chin dot, seen directly at a grazing angle and hidden
+    from mirror 0, was paired there with the image of a like dot the direct view does not see, 3.1 mm from the face
+    against its own pairing's 3.4 mm, and kept 6-11 mm off for 45 frames (24 identity switches); its own pairing with
+    mirror 1 holds over 78 chained frames against 62."""
     if nearer_mm > RIVAL_NEARER_MM:
         return True
     return bool(abs(nearer_mm) <= RIVAL_NEARER_MM and better_paired)
