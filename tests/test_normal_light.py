@@ -878,7 +878,7 @@ def test_hx4_a_dot_found_again_on_its_direct_track_under_a_second_label_merges_b
                            "--report", tmp_path / "hx4.json"], capsys)
     assert code == 0, err
     assert "light: ordinary (coloured dots), as frame 0 shows it" in out + err
-    s, report, _ = scored_take(clip, tmp_path / "hx4.c3d", tmp_path / "hx4.json")
+    s, _, _ = scored_take(clip, tmp_path / "hx4.c3d", tmp_path / "hx4.json")
     assert np.count_nonzero(s["ids"] == 242) == 1                  # the chin dot: one label
     assert s["split_markers"] <= 1 and s["identity_switches"] == 0
     err_mm = s["error_mm"][:, s["ids"] >= 0]
