@@ -871,7 +871,7 @@ def test_hx4_a_dot_found_again_on_its_direct_track_under_a_second_label_merges_b
     frame 60 on the same direct-view 2D track with a new mirror track, under a second label; over the 30 frames of a
     fast expression the first label's conjecture lay 1.07 mm (median) from the second's points, just over the
     1 mm that merges two labels. Two labels that are the only ones measured on one direct track merge within
-    2 mm (``late.SOLE_TRACK_MERGE_MM``): 2 split labels -> 1. Left (README, known failures): a dot measured in 12
+    2 mm (``splits.SOLE_TRACK_MERGE_MM``): 2 split labels -> 1. Left (README, known failures): a dot measured in 12
     scattered frames before frame 29 and again from frame 58, too little for its learned relations to follow."""
     clip = ROOT / "sample_scenes" / "normal" / "hx4"
     code, out, err = _run(["track", clip / "clip.mp4", "--camera", clip / "camera.json", "-o", tmp_path / "hx4.c3d",

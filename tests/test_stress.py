@@ -118,7 +118,7 @@ def test_later_chains_of_a_marker_merge_back_into_it(tmp_path, capsys):
                    conjectured=take["conjectured"], seen=seen)
     print(f"motion clip: {report['per_frame']['merged_labels'][0]} labels merged, {s['split_markers']} split left, "
           f"{s['identity_switches']} switches, {100 * s['seen_reported_fraction']:.2f} % reported")
-    # merged by their conjectures (core.track.late.merge_split_labels) or when a followed dot reaches the
+    # merged by their conjectures (core.track.splits.merge_split_labels) or when a followed dot reaches the
     # later label's measurement (core.track.singleview.follow_dots_through_gaps): none left
     assert report["per_frame"]["merged_labels"][0] >= 1 and s["split_markers"] == 0
     # 98.9 % reported with the dots followed through gaps (core.track.singleview; 94.9 % before) and past
@@ -186,7 +186,7 @@ def test_the_sample_clip_reports_its_seen_markers(tmp_path, capsys):
     assert s["seen_reported_fraction"] >= 0.99
     assert s["identity_switches"] == 0 and np.nanmax(err_mm) < 2.0
     # its one split label (a lower-lip marker behind the upper lip for 8 frames while the mouth moved
-    # 8 mm sideways; mirror 1 kept the dot) merges along that mirror's 2D track (late.merge_along_2d_tracks)
+    # 8 mm sideways; mirror 1 kept the dot) merges along that mirror's 2D track (splits.merge_along_2d_tracks)
     assert s["split_markers"] == 0
 
 

@@ -322,7 +322,7 @@ def test_labels_on_one_pair_of_2d_tracks_are_one_marker():
     turns under two labels while the direct view's and a mirror's 2D tracks followed it throughout.
     Two labels, never measured together, that are the only ones on one (direct track, mirror track)
     pair merge; a third label on the pair, labels measured in one frame, or labels far apart do not."""
-    from mirrorcap.core.track.late import _shared_track_pairs, merge_along_2d_tracks
+    from mirrorcap.core.track.splits import _shared_track_pairs, merge_along_2d_tracks
 
     F = 12
     # candidate c of frame f is c = f * 10 + slot; slot s lies on direct track s and mirror-0 track s
@@ -372,7 +372,7 @@ def test_a_mirror_track_handover_is_vetoed_where_the_direct_view_follows_the_dot
     the other. Labels 0 (frames 0-4) and 1 (frames 7-11), on direct tracks 0 and 1 and both on
     mirror track 0, merge -- unless label 0's direct track has a blob in label 1's first frame
     (``direct_frames``): the direct view followed the dot on elsewhere, so label 1 is another dot."""
-    from mirrorcap.core.track.late import merge_along_2d_tracks
+    from mirrorcap.core.track.splits import merge_along_2d_tracks
 
     F = 12
     dtrack = np.tile(np.arange(10), F)                     # candidate f * 10 + slot: direct track = slot

@@ -40,7 +40,7 @@ from ..capture.views import ClipDetections
 from ..geometry.mirror import points_from_planes, reflect_points
 from ..geometry.rigid import rotation_zyx, to_head_frame
 from .candidates import spans
-from .late import measured_together, merge_labels
+from .splits import measured_together, merge_labels
 from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings
 
 MAX_GATE_PX = 2.5        # the largest distance (pixels) from the predicted image to the blob taken
@@ -547,7 +547,7 @@ def follow_dots_through_gaps(result: TrackResult, det: ClipDetections, cands, no
     chain that coasted out -- and follows the merged markers' new gaps); after each, labels found
     to be one dot (a chain that reaches the other's measurement, the two never measured in the
     same frame) are merged, the earlier-seen label keeping the other's measurements
-    (:func:`.late.merge_labels`). ``limit``: :func:`meeting_limit`. Returns the result (a new one when labels merged);
+    (:func:`.splits.merge_labels`). ``limit``: :func:`meeting_limit`. Returns the result (a new one when labels merged);
     ``stats["followed_through_gaps"]`` counts the cells measured per frame."""
     per_frame = np.zeros(result.assigned_blob.shape[0], int)
     result.stats["followed_through_gaps"] = per_frame

@@ -50,8 +50,8 @@ from .bridge import bridge_gaps_along_2d_tracks
 from .initial import initial_markers
 from .candidates import ClipCandidates, clip_candidates
 from .gapfill import doubt_outlying_measurements, fill_gaps
-from .late import (add_late_markers, lost_markers, merge_along_2d_tracks, merge_split_labels,
-                   release_other_markers_blobs, settle_lost_markers)
+from .late import add_late_markers, lost_markers, release_other_markers_blobs, settle_lost_markers
+from .splits import merge_along_2d_tracks, merge_split_labels
 from .singleview import follow_dots_through_gaps, measure_in_single_views, meeting_limit
 from .motion import (ConstantVelocityKalman, conjecture_motion, conjecture_since_last_seen, false_tracking,
                      neighbours)
