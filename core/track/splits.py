@@ -16,10 +16,10 @@ from .result import TrackResult, TrackSettings
 MERGE_MM = 1.0          # a later chain continues a marker when it lies this near the marker's conjecture
 # (the takes' conjectures are 0.2-0.3 mm RMS off where measured: 1 mm is over 3 sigma)
 MERGE_SEARCH_MM = 15.0  # ... among the markers whose neutral positions lie this near
-#: ... or this near, when the two labels are the only ones measured on one direct-view 2D track (merge_split_labels):
-#: the held-out hx4's chin dot was lost through mirror 0 at frame 35 and found again at frame 60 on the same direct
-#: track with a new mirror track, under a second label; over the 30 frames of a fast expression the first label's
-#: conjecture lay 1.07 mm (median) from the second's points
+#: in place of MERGE_MM, how near the earlier label's conjecture must lie when the two labels are the only ones
+#: measured on one direct-view 2D track (merge_split_labels): the held-out hx4's chin dot was lost through mirror 0
+#: at frame 35 and found again at frame 60 on the same direct track with a new mirror track, under a second label;
+#: over the 30 frames of a fast expression the first label's conjecture lay 1.07 mm (median) from the second's points
 SOLE_TRACK_MERGE_MM = 2.0
 
 

@@ -153,7 +153,8 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
     # frames) or into a later label of it, its points on that label's path (settle_lost_markers)
     passive, lost_initial, lost = lost_markers(result, s)
     tracks = candidate_tracks(det, cands) if s.follow_2d_tracks else None
-    result = merge_split_labels(result, s, tracks[0] if tracks is not None else None)
+    direct_track = tracks[0] if tracks is not None else None
+    result = merge_split_labels(result, s, direct_track)
     result = merge_along_2d_tracks(result, tracks, direct_track_frames(det, cands) if tracks is not None else None)
     result = bridge_gaps_along_2d_tracks(result, det, cands, tracks, (normals, ds))
     lap("final_pass")
@@ -162,7 +163,7 @@ def track(frames, camera: Camera, planes, settings: TrackSettings | None = None,
         result = follow_dots_through_gaps(result, det, cands, normals, ds, camera.focal_px, s, limit,
                                           passive=passive, lost_initial=lost_initial)
         # the followed dots steady the earlier marker's conjecture
-        result = merge_split_labels(result, s, tracks[0] if tracks is not None else None)
+        result = merge_split_labels(result, s, direct_track)
     result = release_other_markers_blobs(result, det, cands, normals, ds, camera.focal_px, tracks)
     result = settle_lost_markers(result, lost, s.gate_mm)
     result = doubt_outlying_measurements(result, s.neighbour_radius_mm, cands, det=det)
