@@ -172,7 +172,9 @@ stress-clips: $(STAMP)
 # skin, 240 dots of 2.8 mm, mirrors at 45 and 41 deg, the head 5 mm off the axis, +-15 deg yaw; held out at stop 53,
 # its identity switches fixed at stop 55); hx4 (1152x648, a skin of sRGB 110,75,58, 280 dots of 2.6 mm, mirrors at
 # 44 and 42 deg tilted -3 and 4 deg, +-16 deg pitch; held out at stop 55, kept for a dot split into two labels
-# without its rig file). About 142 minutes.
+# without its rig file); hy2 (1024x576 at a 1400 px focal length, a skin of sRGB 200,160,140, 240 dots of 2.4 mm,
+# mirrors at 42 and 40 deg, the head turned 5 deg; held out at stop 56, kept for a silhouette dot paired with a like
+# dot's image). About 147 minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -217,6 +219,9 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 110,75,58 --out sample_scenes/normal/hx4 --size 1152 648 \
 		--mirror-deg 44 42 --mirror-tilt -3 4 --markers 280 --marker-mm 2.6 --head-deg 16 12 4 --head-turn 6 3 0 \
 		--head-offset 2 5 --tempo 1.4 --frames 90 --samples 4 --seed 10606 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 200,160,140 --out sample_scenes/normal/hy2 --size 1024 576 \
+		--mirror-deg 42 40 --markers 240 --marker-mm 2.4 --head-deg 12 14 5 --head-turn 0 -5 0 --tempo 1.2 \
+		--frames 90 --samples 4 --seed 20712 --no-scan
 
 # Stress clips with an object passed in front of the face (stop 46): a dark sphere -- a hand or a microphone under
 # black light -- swept sideways before the lower face (sample_scenes/occlude_clip.py), hiding the mouth's dots from

@@ -32,7 +32,12 @@ LATE_OFF_FACE_MM = 7.0
 #: 6-9 mm along its ray on tan720 and deep720) are rivals, and the one considered later replaces the kept one
 #: (:func:`_replaces_rival`) when it lies RIVAL_NEARER_MM nearer the face along its ray (:func:`.onface.face_offset`),
 #: or when neither lies that much nearer and its pairing of 2D tracks is the better supported. At 4 mm along the ray
-#: wide576 lost 1 % of its seen marker-frames: two stretches of one dot at the silhouette, their rests 4.6 mm apart
+#: wide576 lost 1 % of its seen marker-frames: two stretches of one dot at the silhouette, their rests 4.6 mm apart.
+#: A marker kept from several stretches lies as far off the face as the nearest of them came: at the silhouette the
+#: plane through a dot's neighbours misses the face curving away, and held-out hy2's cheek dot, 2.97 mm off it where
+#: its kept chain began, 9.1 mm where an earlier stretch began, lost to a like dot's image 10.7 mm deeper (2.1 mm off)
+#: when the earlier stretch's distance counted: 30 frames 10.7 mm off, 13 identity switches (hx4 and small540 changed
+#: too, no other committed clip)
 RIVAL_ACROSS_MM = 2.0
 RIVAL_ALONG_MM = 5.0
 RIVAL_NEARER_MM = 2.0
@@ -186,8 +191,9 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
             if gap.min() <= same_marker_mm:  # another stretch of a marker kept: it is seen from then
                 same = others[int(np.argmin(gap))]
                 if first_f[c] < seen_from[same] and gap.min() <= REST_AGREE_MM:
-                    at_rest[same] = at_rest[c]      # ... and where it rests is read nearer the neutral frame,
-                    face_off[same] = offset[0]      # and how far off the face it lies (for its rivals)
+                    at_rest[same] = at_rest[c]      # ... and where it rests is read nearer the neutral frame
+                # how far off the face it lies (for its rivals): the nearest any of its stretches came
+                face_off[same] = np.fmin(face_off[same], offset[0])
                 seen_from[same] = min(seen_from[same], first_f[c])
                 continue
         tracks_c = direct_track[cand_of[rows]]
