@@ -174,7 +174,9 @@ stress-clips: $(STAMP)
 # 44 and 42 deg tilted -3 and 4 deg, +-16 deg pitch; held out at stop 55, kept for a dot split into two labels
 # without its rig file); hy2 (1024x576 at a 1400 px focal length, a skin of sRGB 200,160,140, 240 dots of 2.4 mm,
 # mirrors at 42 and 40 deg, the head turned 5 deg; held out at stop 56, kept for a silhouette dot paired with a like
-# dot's image). About 147 minutes.
+# dot's image); hy6 (960x540, a skin of sRGB 90,60,45, 220 dots of 2.6 mm, mirrors at 45 deg, the head turned;
+# held out at stop 56, kept for two like dots at the silhouette each paired with the other's image). About 151
+# minutes.
 normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin light --out sample_scenes/normal/light --frames 120 \
 		--seed 21 --no-scan
@@ -222,6 +224,9 @@ normal-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 200,160,140 --out sample_scenes/normal/hy2 --size 1024 576 \
 		--mirror-deg 42 40 --markers 240 --marker-mm 2.4 --head-deg 12 14 5 --head-turn 0 -5 0 --tempo 1.2 \
 		--frames 90 --samples 4 --seed 20712 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --light normal --skin 90,60,45 --out sample_scenes/normal/hy6 --size 960 540 \
+		--focal 900 --mirror-deg 45 45 --markers 220 --marker-mm 2.6 --head-deg 10 12 6 --head-turn -4 0 3 \
+		--tempo 1.7 --frames 90 --samples 4 --seed 20716 --no-scan
 
 # Stress clips with an object passed in front of the face (stop 46): a dark sphere -- a hand or a microphone under
 # black light -- swept sideways before the lower face (sample_scenes/occlude_clip.py), hiding the mouth's dots from

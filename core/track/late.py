@@ -41,6 +41,9 @@ LATE_OFF_FACE_MM = 7.0
 RIVAL_ACROSS_MM = 2.0
 RIVAL_ALONG_MM = 5.0
 RIVAL_NEARER_MM = 2.0
+#: ... or this many times the misfit of the plane through the dot's neighbours to them, where that is more
+#: (:func:`_replaces_rival`, as :func:`.onface.beyond` widens its limit)
+RIVAL_MISFIT_FACTOR = 4.0
 
 
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
@@ -154,7 +157,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     # neither is clearly nearer the better supported pairing (:func:`_replaces_rival`)
     direct_track, mirror_track = candidate_tracks(det, cands)
     owner = np.full(int(direct_track.max(initial=-1)) + 1, -1)          # the kept chain on each direct track
-    face_off, blobs_of = {}, {}
+    face_off, misfit, blobs_of = {}, {}, {}
     paired = chain_pairing_support(good, support, [by_chain[bounds[c]:bounds[c + 1]] for c in good],
                               direct_track[cand_of], mirror_track[cand_of])
 
@@ -194,13 +197,15 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
                     at_rest[same] = at_rest[c]      # ... and where it rests is read nearer the neutral frame
                 # how far off the face it lies (for its rivals): the nearest any of its stretches came
                 face_off[same] = np.fmin(face_off[same], offset[0])
+                misfit[same] = np.fmax(misfit[same], offset[1])     # ... and how loosely the face there fits
                 seen_from[same] = min(seen_from[same], first_f[c])
                 continue
         tracks_c = direct_track[cand_of[rows]]
-        face_off[c] = offset[0]
+        face_off[c], misfit[c] = offset
         rival = _rival(owner[tracks_c], at_rest, c, R[q].T @ (point / np.linalg.norm(point)))
         if rival >= 0:
-            if not _replaces_rival(face_off[rival] - face_off[c], paired[c] > paired[rival]):
+            if not _replaces_rival(face_off[rival] - face_off[c], paired[c] > paired[rival], rms[c] < rms[rival],
+                                   max(misfit[rival], misfit[c])):
                 continue
             drop(rival)                                                # the rival was the wrong pairing
         for held in holders:
@@ -219,15 +224,31 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
             np.r_[colour, col[entry_of[keep]]], np.r_[entry, [seen_from[c] for c in keep]])
 
 
-def _replaces_rival(nearer_mm: float, better_paired: bool) -> bool:
-    """Does a late chain replace its rival on one direct 2D track (:func:`_rival`)? Yes when it lies
-    :data:`RIVAL_NEARER_MM` or more nearer the face along its ray than the rival (``nearer_mm``: the rival's
-    :func:`.onface.face_offset` less the chain's; NaN: no), and also when neither lies that much nearer and the
-    chain's pairing of 2D tracks is the better supported (``better_paired``, :func:`.pairing.chain_pairing_support`).
+def _replaces_rival(nearer_mm: float, better_paired: bool, better_fit: bool | None = None,
+                    misfit_mm: float = 0.0) -> bool:
+    """Does a late chain replace its rival on one direct 2D track (:func:`_rival`)? ``nearer_mm``: the rival's
+    :func:`.onface.face_offset` less the chain's (NaN: no); ``better_paired``: the chain's pairing of 2D tracks is the
+    better supported (:func:`.pairing.chain_pairing_support`); ``better_fit``: its band residual is the lower (RMS
+    over its candidates; None: not known); ``misfit_mm``: the looser of the two faces' misfits to their markers.
+
+    1. Yes when it lies nearer the face by more than the margin: :data:`RIVAL_NEARER_MM`, or
+       :data:`RIVAL_MISFIT_FACTOR` times ``misfit_mm`` where that is more (:func:`.onface.beyond` widens its limit
+       so where the plane through the dot's neighbours misses the face curving away).
+    2. Within that margin, where the band and the pairing agree on one of the two, that one stays.
+    3. Else as before: yes when :data:`RIVAL_NEARER_MM` nearer, or within it and the better paired.
+
     At a grazing angle the face around a dot says little: hv2's chin dot, seen directly at a grazing angle and hidden
     from mirror 0, was paired there with the image of a like dot the direct view does not see, 3.1 mm from the face
     against its own pairing's 3.4 mm, and kept 6-11 mm off for 45 frames (24 identity switches); its own pairing with
-    mirror 1 holds over 78 chained frames against 62."""
+    mirror 1 holds over 78 chained frames against 62. At the silhouette the plane misses the face: held-out hy6's
+    cheek dot, its own pairing 6.2 mm off a plane 5.0 mm off its own markers and a like dot's image's 2.2 mm, lost to
+    the latter (8 mm off, 12 identity switches); its own pairing sits nearer its band (0.27 px RMS against 0.35) and
+    holds over more chained frames (46 against 32)."""
+    margin = max(RIVAL_NEARER_MM, RIVAL_MISFIT_FACTOR * misfit_mm) if np.isfinite(misfit_mm) else RIVAL_NEARER_MM
+    if nearer_mm > margin:
+        return True
+    if better_fit is not None and abs(nearer_mm) <= margin and better_fit == better_paired:
+        return bool(better_fit)
     if nearer_mm > RIVAL_NEARER_MM:
         return True
     return bool(abs(nearer_mm) <= RIVAL_NEARER_MM and better_paired)
