@@ -53,7 +53,7 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
     :data:`REPAIR_SD` sd (:func:`_repair_from_rivals`). With the clip's detections ``det`` (and their
     areas), a measurement through a mirror blob of two dots' images (:data:`..capture.views.MERGED_SHARE`
     times its typical dot's area) is doubted whatever its distance (:func:`through_merged_blob`), and one through
-    such a direct-view blob (:func:`through_merged_direct_blob`: a clump of like dots at the silhouette) teaches
+    such a direct-view blob (a clump of like dots at the silhouette) teaches
     the relations nothing and is doubted beyond :data:`CLUMP_OFF_MM` of the estimate. In place;
     ``stats["doubted"]`` and ``stats["repaired"]`` count the measurements doubted and re-paired per frame,
     ``stats["merged_images"]`` the doubted ones through such a blob, in a mirror or the direct view."""
@@ -67,8 +67,8 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
         return result
     motion = result.head_frame - result.neutral[None]
     nidx, _ = neighbours(result.neutral, radius_mm)
-    clump = through_merged_direct_blob(result, det, cands, measured & single) if det is not None and cands is not None \
-        else np.zeros(measured.shape, bool)
+    clump = (through_merged_blob(result, det, cands, measured & single, direct=True) if det is not None
+             and cands is not None else np.zeros(measured.shape, bool))     # a clump of like dots' direct images
     estimate, var = learned_conjectures(motion, measured & ~clump, nidx[:, :learned_neighbours], rows, ridge_mm2,
                                         min_frames, correlation=RELATION_CORRELATION, prior_var=RELATION_PRIOR_VAR)
     off = np.linalg.norm(motion[:, rows] - estimate, axis=2)                 # (F, P), NaN where no estimate
@@ -101,30 +101,22 @@ def doubt_outlying_measurements(result: TrackResult, radius_mm: float, cands=Non
     return result
 
 
-def through_merged_blob(result: TrackResult, det, cands, cells) -> np.ndarray:
+def through_merged_blob(result: TrackResult, det, cands, cells, direct: bool = False) -> np.ndarray:
     """``(F, N)``: which of the measurements ``cells`` ``(F, N)`` take, through their candidate
-    (``result.candidate``, into the clip's candidates ``cands``), a mirror blob of two dots' images
-    (:meth:`..capture.views.ClipDetections.merged`); all False without areas."""
+    (``result.candidate``, into the clip's candidates ``cands``), a mirror blob of two dots' images -- with
+    ``direct``, a direct-view blob of two dots' images or more -- (:meth:`..capture.views.ClipDetections.merged`);
+    all False without areas."""
     out = np.zeros(result.assigned_blob.shape, bool)
     if det.area is None or result.candidate is None:
         return out
     f, m = np.nonzero(cells & (result.candidate >= 0))
+    if direct:
+        out[f, m] = det.merged(0, cands.direct[result.candidate[f, m]])
+        return out
     blob = cands.mirror_blob[result.candidate[f, m]]                           # (n, K), -1: not in that mirror
     for k in range(blob.shape[1]):
         has = blob[:, k] >= 0
         out[f[has], m[has]] |= det.merged(k + 1, blob[has, k])
-    return out
-
-
-def through_merged_direct_blob(result: TrackResult, det, cands, cells) -> np.ndarray:
-    """``(F, N)``: which of the measurements ``cells`` ``(F, N)`` take, through their candidate (``result.candidate``,
-    into the clip's candidates ``cands``), a direct-view blob of two dots' images or more
-    (:meth:`..capture.views.ClipDetections.merged`); all False without areas."""
-    out = np.zeros(result.assigned_blob.shape, bool)
-    if det.area is None or result.candidate is None:
-        return out
-    f, m = np.nonzero(cells & (result.candidate >= 0))
-    out[f, m] = det.merged(0, cands.direct[result.candidate[f, m]])
     return out
 
 

@@ -232,8 +232,8 @@ def _replaces_rival(nearer_mm: float, better_paired: bool, better_fit: bool | No
     over its candidates; None: not known); ``misfit_mm``: the looser of the two faces' misfits to their markers.
 
     1. Yes when it lies nearer the face by more than the margin: :data:`RIVAL_NEARER_MM`, or
-       :data:`RIVAL_MISFIT_FACTOR` times ``misfit_mm`` where that is more (:func:`.onface.beyond` widens its limit
-       so where the plane through the dot's neighbours misses the face curving away).
+       :data:`RIVAL_MISFIT_FACTOR` times ``misfit_mm`` where that is more, as :func:`.onface.beyond` widens its
+       limit where the plane through the dot's neighbours misses the face curving away.
     2. Within that margin, where the band and the pairing agree on one of the two, that one stays.
     3. Else as before: yes when :data:`RIVAL_NEARER_MM` nearer, or within it and the better paired.
 
