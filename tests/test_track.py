@@ -667,6 +667,35 @@ def test_a_blobs_area_is_read_against_its_neighbours_dots():
     assert ClipDetections(2, det.xy, det.norm, det.colour, det.frame, det.start).area_share(0) is None
 
 
+def test_which_blobs_are_two_dots_images_is_read_the_same_with_or_without_the_area_shortcut():
+    """stop 56: ClipDetections.merged skips the area share of a blob too small, against its frame's least typical
+    area, to be two dots' images; it answers exactly as the share does, frames of fewer blobs than the neighbours
+    it takes (which borrow another frame's) included, for all blobs or some."""
+    from mirrorcap.core.capture.views import MERGED_SHARE, ClipDetections
+
+    rng = np.random.default_rng(3)
+    counts = np.r_[rng.integers(20, 60, 30), [3, 8, 1, 9]]                # four frames of few blobs
+    F, n = counts.size, int(counts.sum())
+    frame = np.repeat(np.arange(F), counts)
+    xy = rng.uniform(0, 400, (n, 2))
+    area = rng.uniform(6, 14, n)
+    area[rng.random(n) < 0.08] *= rng.uniform(1.5, 3.0)                  # some blobs of two dots' images
+    # a frame whose small dots are few: five of 4 px and two images of them run together (9 px) among large dots
+    # (20 px) -- its typical area there is a small dot's, though the frame's sixth smallest blob is large
+    edge = np.r_[np.full(5, 4.0), 9.0, np.full(14, 20.0)]
+    edge_xy = np.r_[rng.uniform(0, 10, (6, 2)), rng.uniform(200, 400, (14, 2))]
+    xy, area = np.r_[xy, edge_xy], np.r_[area, edge]
+    frame, counts = np.r_[frame, np.full(edge.size, F)], np.r_[counts, edge.size]
+    F, n = F + 1, n + edge.size
+    start = np.r_[0, np.cumsum(counts)]
+    det = ClipDetections(F, [xy], [xy / 1000.0], [np.zeros(n, int)], [frame], [start], [area])
+    truth = det.area_share(0) >= MERGED_SHARE
+    assert 0 < truth.sum() < n and truth[n - edge.size + 5]
+    fresh = ClipDetections(F, [xy], [xy / 1000.0], [np.zeros(n, int)], [frame], [start], [area])
+    some = rng.choice(n, 300, replace=False)
+    assert np.array_equal(fresh.merged(0, some), truth[some]) and np.array_equal(fresh.merged(0), truth)
+
+
 def test_a_single_mirror_measurement_through_a_blob_of_two_dots_images_becomes_a_conjecture():
     """#18, stop 37, dense clip: dot 192's image grazing in mirror 1 ran into its neighbour's for five
     frames at a time; the blob's centre lay between the two images and the point 1.4-2.0 mm along the
