@@ -514,3 +514,19 @@ def test_a_characters_skin_never_takes_the_actors_teeth(head_and_keys):
     own, _ = performance(char, char_keys, 60, 30.0, 5)
     moving = np.linalg.norm(own, axis=2) > 1.0
     assert np.linalg.norm(tr.displacements - own, axis=2)[moving].mean() < 1.1
+
+
+def test_a_sample_spot_that_triangles_share_brings_them_all():
+    """stop 56: the transfer's candidate triangles for a target vertex come from the sample spots nearest it; a
+    vertex or an edge point is sampled once per triangle that holds it, and such a spot brings every one of them,
+    so k nearest spots are not k copies of one point chosen among by float rounding (a character made from the
+    head by subdivision, imported in centimetres, took another triangle 0.37 mm away for one vertex)."""
+    from mirrorcap.core.retarget.transfer import _candidate_triangles
+
+    ring = np.c_[np.cos(np.arange(8) * np.pi / 4), np.sin(np.arange(8) * np.pi / 4), np.zeros(8)] * 10.0
+    V = np.r_[[[0.0, 0.0, 0.0]], ring]
+    T = np.c_[np.zeros(8, int), 1 + np.arange(8), 1 + (np.arange(8) + 1) % 8]     # a fan of 8 around vertex 0
+    rows, tris = _candidate_triangles(V, T, np.array([[0.0, 0.0, 0.5], [5.0, 0.0, 0.0]]), k=1, sample_mm=2.5)
+    assert sorted(tris[rows == 0].tolist()) == list(range(8))                  # the centre: all eight
+    assert sorted(tris[rows == 1].tolist()) == [0, 7]                           # mid-edge 0-1: its two triangles
+    assert np.all(np.diff(rows) >= 0)

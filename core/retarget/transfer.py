@@ -160,8 +160,10 @@ def guess_landmarks(generic: HeadModel, target: HeadModel, rounds: int = 4) -> d
     return {n: int(i) for n, i in zip(missing, np.atleast_1d(idx))}
 
 def _candidate_triangles(V, T, points, k: int, sample_mm: float):
-    """Pairs ``(point index, triangle index)``: the triangles of the ``k`` samples nearest each point,
-    the triangles sampled on a barycentric grid no coarser than ``sample_mm`` (long slivers too)."""
+    """Pairs ``(point index, triangle index)``, sorted: the triangles of the ``k`` sample spots nearest each point,
+    the triangles sampled on a barycentric grid no coarser than ``sample_mm`` (long slivers too); a spot that
+    several triangles share (a vertex, an edge's points) brings them all."""
+    import scipy.sparse as sp
     from scipy.spatial import cKDTree
 
     edges = np.stack([np.linalg.norm(V[T[:, a]] - V[T[:, b]], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], 1)
@@ -176,11 +178,20 @@ def _candidate_triangles(V, T, points, k: int, sample_mm: float):
         samples.append(pts.reshape(-1, 3))
         owner.append(np.repeat(sel, len(bary)))
     samples, owner = np.concatenate(samples), np.concatenate(owner)
-    _, nn = cKDTree(samples).query(points, k=k)
-    cand = np.sort(owner[nn.reshape(len(points), -1)], axis=1)
-    fresh = np.c_[np.ones(len(points), bool), cand[:, 1:] != cand[:, :-1]]       # each triangle once per point
-    rows = np.repeat(np.arange(len(points)), cand.shape[1])[fresh.ravel()]
-    return rows, cand.ravel()[fresh.ravel()]
+    # a vertex or an edge point is sampled once per triangle that holds it: such a sample counts once and brings
+    # every triangle that holds it (else the k nearest can all be one spot's copies, and the triangle holding a
+    # point that lies on an edge is missed by an order that float rounding decides: a character made from the
+    # head by subdivision, imported in centimetres, took another triangle 0.37 mm away for one vertex)
+    spot, first, of_spot = np.unique(np.round(samples, 6), axis=0, return_index=True, return_inverse=True)
+    holds = sp.csr_matrix((np.ones(len(owner)), (of_spot.ravel(), owner)), shape=(len(spot), len(T)))
+    _, nn = cKDTree(samples[first]).query(points, k=min(k, len(spot)))
+    nn = nn.reshape(len(points), -1)
+    near = sp.csr_matrix((np.ones(nn.size), (np.repeat(np.arange(len(points)), nn.shape[1]), nn.ravel())),
+                         shape=(len(points), len(spot)))
+    pairs = near @ holds                                                          # each triangle once per point
+    pairs.sort_indices()
+    pairs = pairs.tocoo()
+    return pairs.row.astype(int), pairs.col.astype(int)
 
 
 SIDE_VOTE_RINGS = 3      # mesh rings over which the side of a slit (lips, lids) is voted
