@@ -179,9 +179,9 @@ def _candidate_triangles(V, T, points, k: int, sample_mm: float):
         owner.append(np.repeat(sel, len(bary)))
     samples, owner = np.concatenate(samples), np.concatenate(owner)
     # a vertex or an edge point is sampled once per triangle that holds it: such a sample counts once and brings
-    # every triangle that holds it (else the k nearest can all be one spot's copies, and the triangle holding a
-    # point that lies on an edge is missed by an order that float rounding decides: a character made from the
-    # head by subdivision, imported in centimetres, took another triangle 0.37 mm away for one vertex)
+    # every triangle that holds it (else the k nearest can all be one spot's copies, which of them float rounding
+    # decides: a character made from the head by subdivision and imported in centimetres missed, for one vertex
+    # on an edge, the triangle the plain import takes, and took the other one on that edge)
     spot, first, of_spot = np.unique(np.round(samples, 6), axis=0, return_index=True, return_inverse=True)
     holds = sp.csr_matrix((np.ones(len(owner)), (of_spot.ravel(), owner)), shape=(len(spot), len(T)))
     _, nn = cKDTree(samples[first]).query(points, k=min(k, len(spot)))
