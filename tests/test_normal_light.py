@@ -860,8 +860,9 @@ def test_hv2_dots_paired_with_other_dots_images_at_a_mirrors_silhouette(tmp_path
     assert brow_and_chin.shape[1] == 3 and np.nanmax(brow_and_chin) < 2.0
     err_mm = s["error_mm"][:, s["ids"] >= 0]
     assert s["identity_switches"] == 0 and s["split_markers"] == 0
-    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 41
-    assert s["seen_reported_fraction"] > 0.97 and s["rms_mm"] < 0.4
+    # stop 56: 41 -> 1 point over 2 mm, 0.34 -> 0.28 mm (late.LATE_OFF_FACE_CAMERA_MM)
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 2
+    assert s["seen_reported_fraction"] > 0.97 and s["rms_mm"] < 0.3
 
 
 def test_hx4_a_dot_found_again_on_its_direct_track_under_a_second_label_merges_back(tmp_path, capsys):
@@ -882,8 +883,9 @@ def test_hx4_a_dot_found_again_on_its_direct_track_under_a_second_label_merges_b
     assert np.count_nonzero(s["ids"] == 242) == 1                  # the chin dot: one label
     assert s["split_markers"] <= 1 and s["identity_switches"] == 0
     err_mm = s["error_mm"][:, s["ids"] >= 0]
-    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 38
-    assert s["seen_reported_fraction"] > 0.965 and s["rms_mm"] < 0.35
+    # stop 56: 38 -> 4 points over 2 mm, 0.33 -> 0.30 mm (late.LATE_OFF_FACE_CAMERA_MM)
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 4
+    assert s["seen_reported_fraction"] > 0.97 and s["rms_mm"] < 0.31
 
 
 def test_a_late_chain_replaces_its_rival_on_a_direct_track_when_nearer_the_face_or_else_better_paired():

@@ -758,10 +758,12 @@ def test_stop_37s_held_out_clip(tmp_path, capsys):
     marker-frames reported (97.0 % without), no switch, no split label. Its worst label (38 points, up to
     6.8 mm) is a phantom: dot 54, seen only directly, paired with the images of dots 53 and 112, both grazing
     in mirror 0 and merged into a blob of a typical dot's area, 6-7 px from where dot 54's image would be.
+    Stop 56: its late chain lay 6.0 mm along its ray from a plane 1.2 mm off its markers, and the camera's limit
+    is 5 mm where the plane fits that closely (``late.LATE_OFF_FACE_CAMERA_MM``): 4 points over 2 mm, 0.28 mm RMS.
     The bounds hold what was measured (the done-when is 99 % and no point over 2 mm)."""
     s, report, ratio_error = _tracked_stress_clip("cam450", tmp_path, capsys)
-    _holds_on_a_held_out_clip(s, report, ratio_error, 0.965, 45)
-    assert s["rms_mm"] < 0.48
+    _holds_on_a_held_out_clip(s, report, ratio_error, 0.965, 4)
+    assert s["rms_mm"] < 0.3
 
 
 def test_a_coasting_marker_does_not_take_a_dot_its_neighbour_has_held(tmp_path, capsys):

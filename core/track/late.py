@@ -25,6 +25,13 @@ from .result import COLOUR_SPACING_MM, TrackResult, TrackSettings, earns_place, 
 #: other clips 7 mm drops four labels, none of them on a dot the truth counts as seen, and changes one point
 #: over 2 mm (tilt630 53 -> 54)
 LATE_OFF_FACE_MM = 7.0
+#: ... the limit as the camera sees it, where the plane through the dot's neighbours fits them closely (it widens to
+#: 4x its misfit, :func:`.onface.beyond`): a dot seen only directly, paired with like dots' grazing images, lay 5-7 mm
+#: along its ray from planes 1.2 mm off their markers (cam450's dot 54, 38 points 5-7 mm off; hv2's and hx4's like
+#: ones, tens of points). Over the 48 committed clips, points over 2 mm 649 -> 518 (cam450 42 -> 4, hv2 40 -> 1,
+#: hx4 38 -> 4, mirror35 21 -> 3), no switch; ruddy540 loses a dot that lies 5-7 mm off such a plane (92.95 ->
+#: 92.67 % reported) and tempo720 0.1 points. At 5.5 mm hv2 and hx4 keep theirs; the mirrors' limit stays 7 mm
+LATE_OFF_FACE_CAMERA_MM = 5.0
 
 #: one dot in the direct view, two late chains with two depths (add_late_markers): two chains on one direct 2D track
 #: whose rest positions lie within RIVAL_ACROSS_MM of its line of sight and at least RIVAL_ALONG_MM apart along it
@@ -49,7 +56,8 @@ RIVAL_MISFIT_FACTOR = 4.0
 def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSettings, markers, first_pass,
                       focal_px: float, link_mm: float = 1.0, link_frames: int = 3, min_frames: int = 5,
                       same_marker_mm: float = 4.0, same_ray_px: float = 2.0, min_support: float = 0.6,
-                      max_rms_factor: float = 2.0, off_face_mm: float = LATE_OFF_FACE_MM, planes=None):
+                      max_rms_factor: float = 2.0, off_face_mm: float = LATE_OFF_FACE_MM, planes=None,
+                      off_camera_mm: float = LATE_OFF_FACE_CAMERA_MM):
     """Markers the initial window missed (hidden at the start, turned into view later).
 
     Candidates the first pass left alone -- their direct blob and their mirror blobs
@@ -65,11 +73,11 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
     position lies within ``same_marker_mm`` of an existing (or an earlier added) marker's, nor one sharing a
     blob with a chain on a better supported pairing of 2D tracks (:func:`.pairing.chain_pairing_support`; a chain
     that shares blobs with chains kept on worse supported pairings replaces them), nor one off the face: more
-    than ``off_face_mm`` along its ray, where it is first seen, from the surface through the markers measured then
-    (:func:`.onface.off_the_face`; a direct blob paired with another marker's mirror image lands
-    along its ray, typically ~45 mm away) *and*, with the mirrors' ``planes`` ``(normals (K, 3),
-    ds (K,))`` given, off it as each mirror it was paired through sees it (:func:`.onface.off_in_mirrors`;
-    :data:`LATE_OFF_FACE_MM`):
+    than ``off_camera_mm`` along its ray, where it is first seen, from the surface through the markers measured then
+    (:func:`.onface.off_the_face`; :data:`LATE_OFF_FACE_CAMERA_MM`; a direct blob paired with another marker's mirror
+    image lands along its ray, typically ~45 mm away) *and*, with the mirrors' ``planes`` ``(normals (K, 3),
+    ds (K,))`` given, more than ``off_face_mm`` off it as each mirror it was paired through sees it
+    (:func:`.onface.off_in_mirrors`; :data:`LATE_OFF_FACE_MM`):
     a dot at the face's silhouette lies beyond all its neighbours' rays, where the plane through
     them misses the face curving away (10-30 mm), but the mirror sees it face on. Chance pairings
     with false blobs are scattered in space and time and do not chain. A marker added gets as its
@@ -184,7 +192,7 @@ def add_late_markers(det: ClipDetections, cands: ClipCandidates, s: TrackSetting
         seen_then = seen_then[np.all(np.isfinite(seen_then), axis=1)]
         point, views_then = cands.points[idx[q]], np.where(real, first_pass.camera_mask[f[q]], 0)
         offset = face_offset(seen_then, point)
-        if beyond(offset, off_face_mm) and (
+        if beyond(offset, off_camera_mm) and (
                 planes is None or off_in_mirrors(first_pass.points[f[q]], views_then, point,
                                                   cands.mirror_blob[idx[q]] >= 0, planes, off_face_mm)):
             continue
