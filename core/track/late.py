@@ -28,7 +28,7 @@ LATE_OFF_FACE_MM = 7.0
 #: ... the limit as the camera sees it, where the plane through the dot's neighbours fits them closely (it widens to
 #: 4x its misfit, :func:`.onface.beyond`): a dot seen only directly, paired with like dots' grazing images, lay 5-7 mm
 #: along its ray from planes 1.2 mm off their markers (cam450's dot 54, 38 points 5-7 mm off; hv2's and hx4's like
-#: ones, tens of points). Over the 48 committed clips, points over 2 mm 649 -> 518 (cam450 42 -> 4, hv2 40 -> 1,
+#: ones, tens of points). Over the 48 committed clips, points over 2 mm 612 -> 481 (cam450 42 -> 4, hv2 40 -> 1,
 #: hx4 38 -> 4, mirror35 21 -> 3), no switch; ruddy540 loses a dot that lies 5-7 mm off such a plane (92.95 ->
 #: 92.67 % reported) and tempo720 0.1 points. At 5.5 mm hv2 and hx4 keep theirs; the mirrors' limit stays 7 mm
 LATE_OFF_FACE_CAMERA_MM = 5.0
