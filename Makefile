@@ -79,7 +79,9 @@ contact-sheet: $(STAMP)
 # tuned on by nothing; hq1 (1024x576, 210 dots of 2.6 mm, mirrors at 43 and 49 deg, the head 8 mm off the axis,
 # expressions twice as fast), held out at stop 51, then the clip stop 52's follow-on was found on; hr2 (1152x648, 230
 # dots of 2.5 mm, mirrors at 41 and 46 deg, the head 6 mm off the axis and turned 5 deg, the mirror images touching
-# the face), rendered after stop 52's change and tuned on by nothing. About 122 minutes.
+# the face), rendered after stop 52's change and tuned on by nothing; dense41 (held-out hy11: 720x480 like dense, 280
+# dots of 2.2 mm, mirrors at 41 and 39 deg, so at most 3 markers in both mirrors at once, 4 render samples a pixel),
+# held out at stop 56, kept at stop 57 for the mirrors' scales linked through the head's motion. About 125 minutes.
 stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense --size 720 480 --focal 790 \
 		--markers 290 --marker-mm 2.2 --mirror-deg 50 --distance 650 --frames 300 --seed 11 --no-scan
@@ -153,6 +155,9 @@ stress-clips: $(STAMP)
 	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/hr2 --size 1152 648 --focal 1050 --distance 630 \
 		--mirror-deg 41 46 --markers 230 --marker-mm 2.5 --head-deg 8 16 4 --head-offset -6 4 --head-turn 0 5 0 \
 		--tempo 2.2 --frames 90 --samples 4 --seed 7373 --no-scan
+	$(PY) sample_scenes/make_rig_clip.py --out sample_scenes/stress/dense41 --size 720 480 --focal 790 \
+		--mirror-deg 41 39 --markers 280 --marker-mm 2.2 --head-deg 12 14 5 --tempo 1.5 --frames 90 --samples 4 \
+		--seed 20721 --no-scan
 
 # The normal-light clips of issue #21 (Cycles, cached frames): matte dots of four colours on a light skin
 # (150 dots) and on a dark skin (180 dots, larger head motion), lit by two studio lamps; and hd, held out (1920x1080,

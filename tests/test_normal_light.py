@@ -942,8 +942,10 @@ def test_hy2_a_silhouette_dot_keeps_its_own_mirror_image_over_a_like_dots(tmp_pa
     assert np.isfinite(s["error_mm"][:30, cheek]).all()                # reported from the first frame
     assert s["identity_switches"] == 0 and s["split_markers"] == 0
     err_mm = s["error_mm"][:, s["ids"] >= 0]
-    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 4
-    assert s["seen_reported_fraction"] > 0.99 and s["rms_mm"] < 0.45
+    # stop 57: the mirrors' scales, linked through the head's motion, rest on the markers that move rigidly with it
+    # (core.track.mirrorscale.RIGID_SHARE): 4 -> 0 points over 2 mm, 0.41 -> 0.27 mm RMS
+    assert np.count_nonzero(err_mm[np.isfinite(err_mm)] > 2.0) <= 1
+    assert s["seen_reported_fraction"] > 0.99 and s["rms_mm"] < 0.31
 
 
 def test_hy6_two_like_silhouette_dots_keep_their_own_images(tmp_path, capsys):

@@ -51,6 +51,9 @@ MOTION_FRAMES = 300      # head-motion link: the first frames of the clip it rea
 MOTION_MAX_ERROR = 0.005  # ... refused when its standard error exceeds 0.5 % (too little head motion)
 MOTION_MIN_SHARE = 0.005  # ... or when the head's translation between frames is under 0.5 % of its distance
                           # (the clips move 2-17 %; a still head moves 0)
+RIGID_SHARE = 0.5        # ... from each mirror's half of its markers that move most rigidly with the head: with the true
+                          # normals, 0.12 % off the truth on average over 62 rendered clips with all markers, 0.04 % with
+                          # this half (0.04 / 0.05 / 0.06 % with 1/3, 2/3, 4/5; weighting by residual 0.08-0.14 %)
 MOTION_MAX_SPREAD = 0.01  # ... or when the frame pairs' ratios spread by more than 1 % (0.1-0.4 % on the clips
                           # that link; 2.2 % on one with 20 markers per mirror, whose ratio came out 1.6 % off)
 
@@ -248,43 +251,33 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     markers at a scale of its own (its ``d``), about the camera centre; the head moves them all
     with one rigid motion ``X(b) = R X(a) + t``. Between two frames ``a``, ``b`` the rotation is
     the same for both halves whatever their scales -- fitted to both, each half about its own
-    centroid (markers deforming more than 3x the median residual left out, twice) -- while each
-    half's centroid gives its own translation ``t_k = c_k(b) - R c_k(a) = s_k t``: the ratio of the
-    scales is ``sum t_0 . t_1 / sum |t_0|^2`` over frame pairs 10 frames apart or more (anchors
-    every 5 frames) among the first ``frames``. Figures: ratio, relative_spread (sd of the
-    per-pair ratios), standard_error, samples (frame pairs), markers (tracked through either
-    mirror) and markers_per_mirror. Refused when the
+    centroid (:func:`_pair_motion`) -- while each half's centroid gives its own translation
+    ``t_k = c_k(b) - R c_k(a) = s_k t``: the ratio of the scales is ``sum t_0 . t_1 / sum |t_0|^2`` over
+    frame pairs 10 frames apart or more (anchors every 5 frames) among the first ``frames``. A marker that
+    moves with the expressions moves its half's centroid too: the pairs are fitted twice, the second time with
+    each mirror's :data:`RIGID_SHARE` of its markers that strayed least from the first fits (their mean
+    residual over the pairs they are in; markers in fewer than 3 pairs left out). Figures: ratio,
+    relative_spread (sd of the per-pair ratios), standard_error, samples (frame pairs), markers (tracked
+    through either mirror), markers_per_mirror, rigid_markers_per_mirror and relative_spread_all_markers (the
+    first fits' spread). Refused when the
     head moves too little (its median translation between the pairs under ``MOTION_MIN_SHARE``
     of its distance, or the standard error over ``MOTION_MAX_ERROR``), when the halves do not move
-    together closely enough (the per-pair ratios spread over ``MOTION_MAX_SPREAD``: few markers
-    per mirror, most of them moving with the expressions), or a mirror shows too few tracked
+    together closely enough (the first fits' per-pair ratios, all markers', spread over ``MOTION_MAX_SPREAD``: few
+    markers per mirror, most of them moving with the expressions), or a mirror shows too few tracked
     markers."""
     sub = det.window(0, min(frames, det.n_frames))
     pos = _one_mirror_points(sub, camera, normals, ds)
     seen = [np.isfinite(P[..., 0]) for P in pos]
-    t_pairs, in_common = [[], []], []
+    pairs, in_common = [], []
     F = sub.n_frames
     for a in range(0, F, 5):
         for b in range(a + 10, F, 10):
             common = [np.flatnonzero(s[a] & s[b]) for s in seen]
             in_common.append([len(c) for c in common])
-            if min(len(c) for c in common) < min_markers:
-                continue
-            A = [pos[k][a, common[k]] for k in range(2)]
-            B = [pos[k][b, common[k]] for k in range(2)]
-            keep = [np.ones(len(x), bool) for x in A]
-            for _ in range(3):
-                ca = [A[k][keep[k]].mean(0) for k in range(2)]
-                cb = [B[k][keep[k]].mean(0) for k in range(2)]
-                R, _ = rigid_fit(np.r_[tuple(A[k][keep[k]] - ca[k] for k in range(2))],
-                                 np.r_[tuple(B[k][keep[k]] - cb[k] for k in range(2))])
-                res = [np.linalg.norm((A[k] - ca[k]) @ R.T - (B[k] - cb[k]), axis=1) for k in range(2)]
-                limit = 3.0 * np.median(np.r_[res[0][keep[0]], res[1][keep[1]]])
-                keep = [r <= limit if (r <= limit).sum() >= 3 else keep[k] for k, r in enumerate(res)]
-            for k in range(2):
-                t_pairs[k].append(B[k][keep[k]].mean(0) - R @ A[k][keep[k]].mean(0))
+            if min(len(c) for c in common) >= min_markers:
+                pairs.append((a, b, common))
     markers = [int(s.any(0).sum()) for s in seen]
-    if len(t_pairs[0]) < 5:
+    if len(pairs) < 5:
         at_once = " and ".join(f"{v:.0f}" for v in np.median(np.reshape(in_common, (-1, 2)), axis=0)) \
             if in_common else "none"
         sizes = dot_sizes(det.typical_dot_px())
@@ -295,19 +288,40 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
                               + (f"; {sizes}" if sizes else "") + "): give MIRRORS.json from `mirrorcap mirrors`, or "
                               "make the dots easier to find in the mirrors (larger dots, a closer camera or a higher "
                               "resolution)")
-    t0, t1 = np.array(t_pairs[0]), np.array(t_pairs[1])
+    # each marker's mean residual over the frame pairs it is in: the more rigid share of each mirror's markers
+    strayed = [np.zeros(len(s[0])) for s in seen]
+    fitted = [np.zeros(len(s[0])) for s in seen]
+    t_all = [[], []]
+    for a, b, common in pairs:
+        moves, residual = _pair_motion(pos, a, b, common)
+        for k in range(2):
+            strayed[k][common[k]] += residual[k]
+            fitted[k][common[k]] += 1
+            t_all[k].append(moves[k])
     depth = float(np.nanmedian(pos[0][..., 2]))
-    moved = float(np.median(np.linalg.norm(t0, axis=1)) / depth)
-    w = np.einsum("ij,ij->i", t0, t0)
-    ratio = float(np.einsum("ij,ij->", t0, t1) / w.sum())
-    per_pair = np.einsum("ij,ij->i", t0, t1) / np.maximum(w, 1e-300)
-    spread = float(np.sqrt(np.sum(w * (per_pair - ratio) ** 2) / w.sum()) / abs(ratio))
-    error = spread / np.sqrt(len(w))
-    if moved >= MOTION_MIN_SHARE and np.isfinite(error) and spread > MOTION_MAX_SPREAD:
+    moved = float(np.median(np.linalg.norm(np.array(t_all[0]), axis=1)) / depth)
+    _, spread_all, error_all = _translation_ratio(*t_all)
+    if moved >= MOTION_MIN_SHARE and np.isfinite(error_all) and spread_all > MOTION_MAX_SPREAD:
         raise DegenerateError(f"no marker is seen in both mirrors, and the two halves of the face the mirrors see "
                               f"({markers[0]} and {markers[1]} markers) do not move together closely enough to relate "
                               f"the two mirrors' scales through the head's motion (the frame pairs disagree by "
-                              f"{100 * spread:.1f} %); give MIRRORS.json from `mirrorcap mirrors`")
+                              f"{100 * spread_all:.1f} %); give MIRRORS.json from `mirrorcap mirrors`")
+    rigid = []
+    for k in range(2):
+        mean = np.where(fitted[k] >= 3, strayed[k] / np.maximum(fitted[k], 1), np.inf)
+        rigid.append(mean <= np.quantile(mean[np.isfinite(mean)], RIGID_SHARE) if np.isfinite(mean).any()
+                     else np.zeros(len(mean), bool))
+    t_pairs = [[], []]
+    for a, b, common in pairs:
+        common = [c[rigid[k][c]] for k, c in enumerate(common)]
+        if min(len(c) for c in common) >= 3:
+            for k, t in enumerate(_pair_motion(pos, a, b, common)[0]):
+                t_pairs[k].append(t)
+    if len(t_pairs[0]) < 5:
+        raise DegenerateError(f"no marker is seen in both mirrors, and too few of the markers tracked in each mirror "
+                              f"({markers[0]} and {markers[1]}) move rigidly with the head to relate the two mirrors' "
+                              "scales through its motion: give MIRRORS.json from `mirrorcap mirrors`")
+    ratio, spread, error = _translation_ratio(*t_pairs)
     if not (moved >= MOTION_MIN_SHARE and np.isfinite(error) and error <= MOTION_MAX_ERROR):
         raise DegenerateError(f"no marker is seen in both mirrors, and the head moves too little in the first "
                               f"{F} frames to relate the two mirrors' scales through its motion (it moves "
@@ -316,6 +330,39 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     out = np.array(ds, float)
     out[1] /= ratio
     figures = {"source": "head motion: markers tracked in each mirror", "ratio": 1.0 / ratio,
-               "relative_spread": spread, "standard_error": float(error), "samples": int(len(w)),
-               "markers": int(sum(markers)), "markers_per_mirror": markers}
+               "relative_spread": spread, "standard_error": float(error), "samples": len(t_pairs[0]),
+               "relative_spread_all_markers": spread_all,
+               "markers": int(sum(markers)), "markers_per_mirror": markers,
+               "rigid_markers_per_mirror": [int(r.sum()) for r in rigid]}
     return out, figures
+
+
+def _pair_motion(pos, a, b, common) -> tuple[list, list]:
+    """Between frames ``a`` and ``b``, each half's translation ``t_k = c_k(b) - R c_k(a)`` (its centroid's, under the
+    one rotation ``R`` fitted to both halves about their own centroids) and each marker's residual under that motion,
+    per mirror ``k``; the markers of ``common[k]`` (into ``pos[k]``'s second axis) straying over 3x the median
+    residual are left out of the fit, twice."""
+    A = [pos[k][a, common[k]] for k in range(2)]
+    B = [pos[k][b, common[k]] for k in range(2)]
+    keep = [np.ones(len(x), bool) for x in A]
+    for _ in range(3):
+        ca = [A[k][keep[k]].mean(0) for k in range(2)]
+        cb = [B[k][keep[k]].mean(0) for k in range(2)]
+        R, _ = rigid_fit(np.r_[tuple(A[k][keep[k]] - ca[k] for k in range(2))],
+                         np.r_[tuple(B[k][keep[k]] - cb[k] for k in range(2))])
+        res = [np.linalg.norm((A[k] - ca[k]) @ R.T - (B[k] - cb[k]), axis=1) for k in range(2)]
+        limit = 3.0 * np.median(np.r_[res[0][keep[0]], res[1][keep[1]]])
+        keep = [r <= limit if (r <= limit).sum() >= 3 else keep[k] for k, r in enumerate(res)]
+    return [B[k][keep[k]].mean(0) - R @ A[k][keep[k]].mean(0) for k in range(2)], res
+
+
+def _translation_ratio(t0, t1) -> tuple[float, float, float]:
+    """The ratio of two halves' translations ``t0``, ``t1`` (each ``(pairs, 3)``) over frame pairs,
+    ``sum t_0 . t_1 / sum |t_0|^2``, the spread of the per-pair ratios about it (weighted by ``|t_0|^2``, relative)
+    and its standard error."""
+    t0, t1 = np.asarray(t0, float), np.asarray(t1, float)
+    w = np.einsum("ij,ij->i", t0, t0)
+    ratio = float(np.einsum("ij,ij->", t0, t1) / w.sum())
+    per_pair = np.einsum("ij,ij->i", t0, t1) / np.maximum(w, 1e-300)
+    spread = float(np.sqrt(np.sum(w * (per_pair - ratio) ** 2) / w.sum()) / abs(ratio))
+    return ratio, spread, spread / np.sqrt(len(w))

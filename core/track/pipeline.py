@@ -13,7 +13,8 @@ REPORT.json: ``units``; ``mirrors`` (normal, d per mirror; ``source``: file or
 self-calibration); ``mirror_scale_link`` (self-calibration only: how mirror 1's distance was put in
 mirror 0's units, :func:`.mirrorscale.link_mirror_scales` -- ratio, relative_spread, standard_error,
 samples, markers -- or, with fewer than 3 markers in both mirrors or their ratios spread over 0.5 %,
-:func:`.mirrorscale.link_mirror_scales_by_motion`, which adds markers_per_mirror and, in the second case,
+:func:`.mirrorscale.link_mirror_scales_by_motion`, which adds markers_per_mirror, rigid_markers_per_mirror
+and relative_spread_all_markers and, in the second case,
 ``shared_markers_link``: the doubted link it stands in for (the choice:
 :func:`.mirrorscale.link_self_calibrated_scales`); ``source`` says which; null with MIRRORS.json;
 a warning, :func:`.mirrorscale.scale_link_warning`, when the shared markers' link had to stay though doubted);
