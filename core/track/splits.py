@@ -160,12 +160,14 @@ def _shared_track_pairs(result: TrackResult, direct_track, mirror_track=None) ->
             on = (mirror_track[c, k] >= 0) & (direct_track[c] >= 0)
             keys.append((mirror_track[c[on], k].astype(np.int64) * n_direct + direct_track[c[on]]) * K + k)
             labels.append(m[on])
-    key_label = np.unique(np.c_[np.concatenate(keys), np.concatenate(labels)], axis=0)   # sorted by key
-    _, first_row, n_labels = np.unique(key_label[:, 0], return_index=True, return_counts=True)
+    # the distinct (key, label) pairs, sorted by key, then label: one int64 each (a 1D unique, not a row unique)
+    key_label = np.unique(np.concatenate(keys) * N + np.concatenate(labels))
+    key, label = np.divmod(key_label, N)
+    _, first_row, n_labels = np.unique(key, return_index=True, return_counts=True)
     two = first_row[n_labels == 2]                           # exactly two labels on the track pair
     if two.size == 0:
         return []
-    a, b = key_label[two, 1], key_label[two + 1, 1]
+    a, b = label[two], label[two + 1]
     first = np.argmax(measured, axis=0)
     together = measured_together(measured)
     close = np.linalg.norm(result.neutral[a] - result.neutral[b], axis=1) <= MERGE_SEARCH_MM
