@@ -52,8 +52,9 @@ MOTION_MAX_ERROR = 0.005  # ... refused when its standard error exceeds 0.5 % (t
 MOTION_MIN_SHARE = 0.005  # ... or when the head's translation between frames is under 0.5 % of its distance
                           # (the clips move 2-17 %; a still head moves 0)
 RIGID_SHARE = 0.5        # ... from each mirror's half of its markers that move most rigidly with the head: with the true
-                          # normals, 0.12 % off the truth on average over 60 rendered clips with all markers, 0.04 % with
-                          # this half (0.04 / 0.05 / 0.06 % with 1/3, 2/3, 4/5; weighting by residual 0.08-0.14 %)
+                          # normals, over the 59 rendered clips it links (stop 57), 0.11 % off the truth on average and
+                          # 0.50 % at most with all markers, 0.04 % and 0.14 % with this half (0.04 / 0.05 / 0.06 % with
+                          # 1/3, 2/3, 4/5; weighting by residual 0.08-0.14 %)
 MOTION_MAX_SPREAD = 0.01  # ... or when the frame pairs' ratios spread by more than 1 % (0.1-0.4 % on the clips
                           # that link; 2.2 % on one with 20 markers per mirror, whose ratio came out 1.6 % off)
 
