@@ -155,13 +155,11 @@ class ClipDetections:
         for two dots' images run into one blob. None without areas."""
         from scipy.spatial import cKDTree
 
-        from .markers import NEIGHBOUR_BLOBS
-
         if self.area is None:
             return None
         area = self.area[v]
         blobs = np.arange(area.size) if blobs is None else np.asarray(blobs, int).reshape(-1)
-        k = min(NEIGHBOUR_BLOBS, area.size)    # (a frame of fewer blobs borrows the nearest frame's)
+        k = self._neighbour_count(v)    # (a frame of fewer blobs borrows the nearest frame's)
         if k < 2:
             return np.ones(blobs.size)
         # the tracker's steps ask about a few blobs at a time, again and again: one tree per view, each
@@ -195,12 +193,10 @@ class ClipDetections:
         """Per frame ``(F,)``, the least that :meth:`area_share`'s typical area can be for a blob of view ``v``: the
         frame's ``(k - 1) // 2``-th smallest area (``k`` the neighbours it takes), where the frame has ``k`` blobs
         or more (its nearest blobs are then its own, and any ``k`` of them have a median no smaller); 0 elsewhere."""
-        from .markers import NEIGHBOUR_BLOBS
-
         cache = self.__dict__.setdefault("_least_typical", {})
         if v not in cache:
             area, counts = np.asarray(self.area[v], float), self.counts(v)
-            k = min(NEIGHBOUR_BLOBS, area.size)
+            k = self._neighbour_count(v)
             least = np.zeros(self.n_frames)
             full = np.flatnonzero(counts >= max(k, 1))
             if full.size:
@@ -208,6 +204,13 @@ class ClipDetections:
                 least[full] = area[order[self.start[v][full] + (k - 1) // 2]]
             cache[v] = least
         return cache[v]
+
+    def _neighbour_count(self, v: int) -> int:
+        """How many blobs :meth:`area_share` takes as a blob of view ``v``'s neighbours, itself included:
+        :data:`.markers.NEIGHBOUR_BLOBS`, or all the view has when fewer."""
+        from .markers import NEIGHBOUR_BLOBS
+
+        return min(NEIGHBOUR_BLOBS, len(self.area[v]))
 
     def counts(self, v: int) -> np.ndarray:
         """Detections per frame in view ``v`` ``(F,)``."""
