@@ -295,6 +295,10 @@ def test_the_head_motion_link_matches_the_shared_marker_link_and_refuses_a_still
     still = ClipDetections.of([frames[0]] * 40, camera)
     with pytest.raises(DegenerateError, match="moves too little"):
         link_mirror_scales_by_motion(still, camera, normals, ds)
+    # a take too short for frame pairs 10 frames apart says so, not that too few markers are held (stop 58: dense41's
+    # first 20 frames said "82 and 70 held ..., where 6 are needed")
+    with pytest.raises(DegenerateError, match=r"a take of 20 frames is too short .* at least 26 frames"):
+        link_mirror_scales_by_motion(det.window(0, 20), camera, normals, ds)
     # frames out of order: no 2D track lasts, and the error says how few are held and how large the dots are
     shuffled = ClipDetections.of([frames[i] for i in np.random.default_rng(0).permutation(len(frames))], camera)
     with pytest.raises(DegenerateError, match=r"tracked in each mirror at once .* where 6 are needed; the dots "

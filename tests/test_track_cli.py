@@ -82,14 +82,14 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
     root, rig = rig_clip
     dark = tmp_path / "dark"
     dark.mkdir()
-    for f in range(3):  # the mirrors show nothing
+    for f in range(10):  # the mirrors show nothing (10 frames: the shortest take tracked)
         img = cv2.imread(str(root / "png" / f"{f:03d}.png"))
         img[:, :420] = 0
         img[:, 860:] = 0
         cv2.imwrite(str(dark / f"{f}.png"), img)
     few = tmp_path / "few"
     few.mkdir()
-    for f in range(3):  # an 8-pixel strip of the face: too few markers anywhere
+    for f in range(10):  # an 8-pixel strip of the face: too few markers anywhere
         img = cv2.imread(str(root / "png" / f"{f:03d}.png"))
         strip = np.zeros_like(img)
         strip[300:308] = img[300:308]
@@ -117,7 +117,10 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
         ([*clip, rigid_files["empty"]], "empty rectangle"),
         ([*clip, rigid_files["typo"]], "\"rigid\" must be"),
         ([root / "png", "--camera", tmp_path / "small.json"], "640x480"),
-        ([root / "png", "--camera", root / "camera.json", "--frames", "0:1"], "at least 2 frames"),
+        # a take shorter than a marker must be measured to be reported: one message, not an empty take (stop 58)
+        ([root / "png", "--camera", root / "camera.json", "--frames", "0:1"], "track at least 10 frames"),
+        ([root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json", "--frames", "0:9"],
+         "the take has 9 frame(s) that show the face, and a marker must be measured in 10 frames"),
         ([root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json",
           "--known-length", "nobody", "m001", "20"], "not in the take"),
         ([root / "png", "--camera", root / "camera.json", "--conjecture-limit", "-1"], "--conjecture-limit"),
@@ -127,6 +130,23 @@ def test_track_bad_input(rig_clip, capsys, tmp_path):
         assert code == 2, (args, err)
         assert message in err, (args, err)
         assert list(out.parent.iterdir()) == []
+
+
+def test_a_take_with_no_marker_kept_is_an_error_not_an_empty_file(rig_clip, capsys, tmp_path, monkeypatch):
+    """Should every marker be dropped (none measured in TrackSettings.min_measured_frames frames), the command fails
+    with one message and writes nothing, where it wrote an empty take and said "0 markers" (stop 58)."""
+    from mirrorcap.core.track import pipeline
+    from mirrorcap.core.track.result import keep_measured
+
+    root, _ = rig_clip
+    real = pipeline.track
+    monkeypatch.setattr(pipeline, "track", lambda *a, **k: keep_measured(real(*a, **k), 10 ** 6))
+    out = tmp_path / "out" / "take.c3d"
+    out.parent.mkdir()
+    code, err = _run(["track", root / "png", "--camera", root / "camera.json", "--mirrors", root / "mirrors.json",
+                      "--frames", "0:10", "-o", out, "--report", out.with_suffix(".json"), "-q"], capsys)
+    assert code == 2 and "no marker was measured in 10 frames or more" in err, err
+    assert list(out.parent.iterdir()) == []
 
 
 def test_track_refuses_bad_outputs_and_options_before_any_frame(rig_clip, capsys, tmp_path, monkeypatch):
@@ -164,8 +184,8 @@ def test_track_refuses_bad_outputs_and_options_before_any_frame(rig_clip, capsys
         assert message in err and err.count("\n") == 1, (args, err)
         assert read == [], (args, read)
         assert list(out.parent.iterdir()) == []
-    code, err = _run(["track", *clip, "-o", out, "--frames", "0:3", "-q"], capsys)   # and the same run, well formed
-    assert code == 0 and read == [0, 0, 1, 2] and out.is_file(), err    # (stop 53) frame 0 first shows the light
+    code, err = _run(["track", *clip, "-o", out, "--frames", "0:10", "-q"], capsys)   # and the same run, well formed
+    assert code == 0 and read == [0, *range(10)] and out.is_file(), err    # (stop 53) frame 0 first shows the light
 
 
 def test_track_with_rigid_markers_named_in_the_rig_file(rig_clip, capsys, tmp_path):

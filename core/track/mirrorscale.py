@@ -45,9 +45,12 @@ SCATTER_LIMIT = 10.0     # ... or when the markers scatter between the mirrors b
 LINK_MAX_SPREAD = 0.005  # the shared markers' link is doubted when their ratios spread by more than 0.5 %: 0.01-0.27 %
                          # on the 40 clips, 0.9-2.4 % on that clip re-encoded (its ratio 1.4-2.1 % off)
 MIN_BOTH_MIRROR_SIGHTINGS = 10  # fewer sightings of markers in both mirrors: the scales are linked by head motion
+#: the motion link's opening words when it cannot link (it stands in for markers seen in both mirrors)
+_NOT_SHARED = f"too few markers are seen in both mirrors (under {MIN_BOTH_MIRROR_SIGHTINGS} sightings)"
 MIN_BOTH_MIRROR_MARKERS = 3     # ... and fewer markers: one wrongly paired marker would set the ratio (mirror35,
                                 # one marker's 15 sightings: 1.22 where the truth is 1.00), so head motion links them
 MOTION_FRAMES = 300      # head-motion link: the first frames of the clip it reads
+MOTION_MIN_PAIRS = 5     # ... and the frame pairs it needs, each with markers held in both (26 frames or more)
 MOTION_MAX_ERROR = 0.005  # ... refused when its standard error exceeds 0.5 % (too little head motion)
 MOTION_MIN_SHARE = 0.005  # ... or when the head's translation between frames is under 0.5 % of its distance
                           # (the clips move 2-17 %; a still head moves 0)
@@ -245,6 +248,12 @@ def _one_mirror_points(det: ClipDetections, camera: Camera, normals, ds, band_px
     return out
 
 
+def _frame_pairs(n_frames: int) -> list:
+    """The frame pairs :func:`link_mirror_scales_by_motion` fits among ``n_frames``: ``(a, b)``, anchors ``a`` every
+    5 frames, ``b`` every 10 frames from ``a + 10``."""
+    return [(a, b) for a in range(0, n_frames, 5) for b in range(a + 10, n_frames, 10)]
+
+
 def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, ds, frames: int = MOTION_FRAMES,
                                  min_markers: int = 6) -> tuple[np.ndarray, dict]:
     """``ds`` with mirror 1's distance put in mirror 0's units through the head's motion, for rigs
@@ -267,22 +276,27 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     markers per mirror, most of them moving with the expressions), or a mirror shows too few tracked
     markers."""
     sub = det.window(0, min(frames, det.n_frames))
+    F = sub.n_frames
+    if len(_frame_pairs(F)) < MOTION_MIN_PAIRS:
+        shortest = next(n for n in range(F, 10 * F + 100) if len(_frame_pairs(n)) >= MOTION_MIN_PAIRS)
+        raise DegenerateError(f"{_NOT_SHARED}, and a take of {F} frames is too short to relate the two mirrors' "
+                              f"scales through the head's motion (that takes frame pairs 10 frames apart or more: "
+                              f"at least {shortest} frames); track a longer stretch, or give MIRRORS.json from "
+                              "`mirrorcap mirrors`")
     pos = _one_mirror_points(sub, camera, normals, ds)
     seen = [np.isfinite(P[..., 0]) for P in pos]
     pairs, in_common = [], []
-    F = sub.n_frames
-    for a in range(0, F, 5):
-        for b in range(a + 10, F, 10):
-            common = [np.flatnonzero(s[a] & s[b]) for s in seen]
-            in_common.append([len(c) for c in common])
-            if min(len(c) for c in common) >= min_markers:
-                pairs.append((a, b, common))
+    for a, b in _frame_pairs(F):
+        common = [np.flatnonzero(s[a] & s[b]) for s in seen]
+        in_common.append([len(c) for c in common])
+        if min(len(c) for c in common) >= min_markers:
+            pairs.append((a, b, common))
     markers = [int(s.any(0).sum()) for s in seen]
-    if len(pairs) < 5:
+    if len(pairs) < MOTION_MIN_PAIRS:
         at_once = " and ".join(f"{v:.0f}" for v in np.median(np.reshape(in_common, (-1, 2)), axis=0)) \
             if in_common else "none"
         sizes = dot_sizes(det.typical_dot_px())
-        raise DegenerateError(f"no marker is seen in both mirrors, and too few markers are tracked in each mirror "
+        raise DegenerateError(f"{_NOT_SHARED}, and too few markers are tracked in each mirror "
                               f"at once to relate the two mirrors' scales through the head's motion ({markers[0]} and "
                               f"{markers[1]} over the first {F} frames, but {at_once} held from a frame to the one 10 "
                               f"or more later, typically, where {min_markers} are needed"
@@ -303,7 +317,7 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     moved = float(np.median(np.linalg.norm(np.array(t_all[0]), axis=1)) / depth)
     _, spread_all, error_all = _translation_ratio(*t_all)
     if moved >= MOTION_MIN_SHARE and np.isfinite(error_all) and spread_all > MOTION_MAX_SPREAD:
-        raise DegenerateError(f"no marker is seen in both mirrors, and the two halves of the face the mirrors see "
+        raise DegenerateError(f"{_NOT_SHARED}, and the two halves of the face the mirrors see "
                               f"({markers[0]} and {markers[1]} markers) do not move together closely enough to relate "
                               f"the two mirrors' scales through the head's motion (the frame pairs disagree by "
                               f"{100 * spread_all:.1f} %); give MIRRORS.json from `mirrorcap mirrors`")
@@ -318,13 +332,13 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
         if min(len(c) for c in common) >= 3:
             for k, t in enumerate(_pair_motion(pos, a, b, common)[0]):
                 t_pairs[k].append(t)
-    if len(t_pairs[0]) < 5:
-        raise DegenerateError(f"no marker is seen in both mirrors, and too few of the markers tracked in each mirror "
+    if len(t_pairs[0]) < MOTION_MIN_PAIRS:
+        raise DegenerateError(f"{_NOT_SHARED}, and too few of the markers tracked in each mirror "
                               f"({markers[0]} and {markers[1]}) move rigidly with the head to relate the two mirrors' "
                               "scales through its motion: give MIRRORS.json from `mirrorcap mirrors`")
     ratio, spread, error = _translation_ratio(*t_pairs)
     if not (moved >= MOTION_MIN_SHARE and np.isfinite(error) and error <= MOTION_MAX_ERROR):
-        raise DegenerateError(f"no marker is seen in both mirrors, and the head moves too little in the first "
+        raise DegenerateError(f"{_NOT_SHARED}, and the head moves too little in the first "
                               f"{F} frames to relate the two mirrors' scales through its motion (it moves "
                               f"{100 * moved:.2f} % of its distance between frames, standard error {100 * error:.2f} %); turn the head during the take or give MIRRORS.json from "
                               "`mirrorcap mirrors`")

@@ -182,8 +182,10 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
 
     check_output_paths(output, report)
     check_known_length(known_length)
-    if len(frames) < 2:
-        raise InputError("tracking needs at least 2 frames")
+    shortest = (settings or TrackSettings()).min_measured_frames
+    if len(frames) < max(shortest, 2):
+        raise InputError(f"the take has {len(frames)} frame(s) that show the face, and a marker must be measured in "
+                         f"{shortest} frames to be reported: track at least {max(shortest, 2)} frames")
     det = ClipDetections.of(frames, camera)  # the one normalisation of the clip's pixels
     first = det.head(SELFCAL_FRAMES)
     if mirrors is None:
@@ -209,6 +211,9 @@ def track_detections(numbers, frames, camera: Camera, fps: float, output, *, rep
     t1 = time.perf_counter()
     result = track(det, camera, planes, settings, progress=progress, rigid=rigid, seeds=seeds)
     t_track = time.perf_counter() - t1
+    if not result.labels:
+        raise DegenerateError(f"no marker was measured in {shortest} frames or more, so the take would be empty: check "
+                              "the detections (`mirrorcap detect`, or the clip's 2D tracks) and the mirrors")
     points = result.points
     head = result.head_pose.copy()
     if known_length is not None:
