@@ -97,7 +97,7 @@ def test_detection_and_the_whole_track_command_run_on_one_blas_and_one_opencv_th
             if _blas_threads() != [2]:
                 pytest.skip("this machine's BLAS offers one thread: nothing to limit")
             for call in (lambda: detect.run_detection(None, "out.csv"), lambda: pipeline.run_track(None, None, "t.c3d"),
-                         lambda: pipeline.track_detections([0, 1], [None, None], None, 30.0, "t.c3d")):
+                         lambda: pipeline.track_detections(list(range(10)), [None] * 10, None, 30.0, "t.c3d")):
                 with pytest.raises(Stop):
                     call()
             assert _blas_threads() == [2]
