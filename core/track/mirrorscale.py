@@ -23,6 +23,7 @@ propagated through eq. 3.10-3.11 for each mirror).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -269,8 +270,8 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     residual over the pairs they are in; markers in fewer than 3 pairs left out). Figures: ratio,
     relative_spread (sd of the per-pair ratios), standard_error, samples (frame pairs), markers (tracked
     through either mirror), markers_per_mirror, rigid_markers_per_mirror and relative_spread_all_markers (the
-    first fits' spread). Refused when the
-    head moves too little (its median translation between the pairs under ``MOTION_MIN_SHARE``
+    first fits' spread). Refused when the take is too short for :data:`MOTION_MIN_PAIRS` frame pairs (under 26
+    frames), when the head moves too little (its median translation between the pairs under ``MOTION_MIN_SHARE``
     of its distance, or the standard error over ``MOTION_MAX_ERROR``), when the halves do not move
     together closely enough (the first fits' per-pair ratios, all markers', spread over ``MOTION_MAX_SPREAD``: few
     markers per mirror, most of them moving with the expressions), or a mirror shows too few tracked
@@ -278,7 +279,7 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     sub = det.window(0, min(frames, det.n_frames))
     F = sub.n_frames
     if len(_frame_pairs(F)) < MOTION_MIN_PAIRS:
-        shortest = next(n for n in range(F, 10 * F + 100) if len(_frame_pairs(n)) >= MOTION_MIN_PAIRS)
+        shortest = next(n for n in itertools.count(F) if len(_frame_pairs(n)) >= MOTION_MIN_PAIRS)
         raise DegenerateError(f"{_NOT_SHARED}, and a take of {F} frames is too short to relate the two mirrors' "
                               f"scales through the head's motion (that takes frame pairs 10 frames apart or more: "
                               f"at least {shortest} frames); track a longer stretch, or give MIRRORS.json from "
