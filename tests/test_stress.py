@@ -268,24 +268,15 @@ def test_the_head_motion_link_matches_the_shared_marker_link_and_refuses_a_still
     """On the sample clip, where 80 markers are seen in both mirrors, the head-motion link gives the
     same ratio within 0.15 % of the truth (measured 0.04 %; the shared-marker link 0.07 %). A head
     that does not move (one frame repeated) cannot fix the ratio: one clear error."""
-    from mirrorcap.core.capture.markers import ExtractionSettings
-    from mirrorcap.core.capture.rig import load_rig_views
-    from mirrorcap.core.capture.video import open_source
-    from mirrorcap.core.capture.detect import DetectionStream
-    from mirrorcap.core.capture.markers import ColorClasses
     from mirrorcap.core.capture.views import ClipDetections
     from mirrorcap.core.common.errors import DegenerateError
     from mirrorcap.core.geometry.camera import Camera
     from mirrorcap.core.track.mirrorscale import link_mirror_scales_by_motion
-    from mirrorcap.core.track.pipeline import collect_detections
     from mirrorcap.core.track.selfcal import self_calibrate_mirror
 
     camera = Camera.load(SAMPLE / "camera.json")
     truth = np.load(SAMPLE / "truth.npz")
-    ex = ExtractionSettings()
-    stream = DetectionStream(open_source(SAMPLE / "clip.mp4"), ColorClasses.default(), ex,
-                             load_rig_views(SAMPLE / "rig.json"))
-    _, frames = collect_detections(stream)
+    frames = _rig_clip_frames(SAMPLE)
     det = ClipDetections.of(frames, camera)
     cals = [self_calibrate_mirror(det.head(10), camera, k) for k in range(2)]
     normals, ds = np.stack([c.plane.normal for c in cals]), [c.plane.d for c in cals]
@@ -314,30 +305,37 @@ def test_the_head_motion_link_rests_on_the_markers_that_move_rigidly(name, befor
     and hy11 (a held-out dense rig, 720x480, 280 dots, 2-3 markers in both mirrors at once) 0.27 %, its take 0.57 mm
     RMS. Each mirror's half of its markers that strayed least from the first fits now carries the link: 0.04 % on
     average (0.007, 0.021 and 0.023 % here; hy11 0.08 %, its take 0.34 mm)."""
-    from mirrorcap.core.capture.detect import DetectionStream
-    from mirrorcap.core.capture.markers import ColorClasses, ExtractionSettings
-    from mirrorcap.core.capture.rig import load_rig_views
-    from mirrorcap.core.capture.video import open_source
     from mirrorcap.core.capture.views import ClipDetections
     from mirrorcap.core.geometry.camera import Camera
     from mirrorcap.core.track.mirrorscale import link_mirror_scales_by_motion
-    from mirrorcap.core.track.pipeline import collect_detections
 
     clip = ROOT / "sample_scenes" / name
     camera = Camera.load(clip / "camera.json")
     truth = np.load(clip / "truth.npz")
-    light = json.loads((clip / "clip.json").read_text()).get("light", "uv")
-    stream = DetectionStream(open_source(clip / "clip.mp4"), ColorClasses.default(light),
-                             ExtractionSettings(light=light), load_rig_views(clip / "rig.json"))
-    _, frames = collect_detections(stream)
-    ds, figures = link_mirror_scales_by_motion(ClipDetections.of(frames, camera), camera, truth["mirror_normals"],
-                                               [-1.0, -1.0])
+    ds, figures = link_mirror_scales_by_motion(ClipDetections.of(_rig_clip_frames(clip), camera), camera,
+                                               truth["mirror_normals"], [-1.0, -1.0])
     error = ds[1] / ds[0] / (truth["mirror_d"][1] / truth["mirror_d"][0]) - 1.0
     print(f"{name}: {100 * error:+.3f} % (all markers: {before:+.2f} %), rigid markers "
           f"{figures['rigid_markers_per_mirror']} of {figures['markers_per_mirror']}")
     assert abs(error) < 0.0005
-    assert all(0 < r <= (m + 1) // 2 for r, m in zip(figures["rigid_markers_per_mirror"], figures["markers_per_mirror"]))
+    assert all(0 < r <= (m + 1) // 2
+               for r, m in zip(figures["rigid_markers_per_mirror"], figures["markers_per_mirror"]))
     assert figures["relative_spread"] < figures["relative_spread_all_markers"]
+
+
+def _rig_clip_frames(clip):
+    """A rendered clip folder's per-frame detections (:class:`core.capture.views.FrameDets`), found as with its rig
+    file's views, under the light its clip.json names (UV where it names none)."""
+    from mirrorcap.core.capture.detect import DetectionStream
+    from mirrorcap.core.capture.markers import ColorClasses, ExtractionSettings
+    from mirrorcap.core.capture.rig import load_rig_views
+    from mirrorcap.core.capture.video import open_source
+    from mirrorcap.core.track.pipeline import collect_detections
+
+    light = json.loads((clip / "clip.json").read_text()).get("light", "uv")
+    stream = DetectionStream(open_source(clip / "clip.mp4"), ColorClasses.default(light),
+                             ExtractionSettings(light=light), load_rig_views(clip / "rig.json"))
+    return collect_detections(stream)[1]
 
 
 @contextlib.contextmanager

@@ -46,8 +46,6 @@ SCATTER_LIMIT = 10.0     # ... or when the markers scatter between the mirrors b
 LINK_MAX_SPREAD = 0.005  # the shared markers' link is doubted when their ratios spread by more than 0.5 %: 0.01-0.27 %
                          # on the 40 clips, 0.9-2.4 % on that clip re-encoded (its ratio 1.4-2.1 % off)
 MIN_BOTH_MIRROR_SIGHTINGS = 10  # fewer sightings of markers in both mirrors: the scales are linked by head motion
-#: the motion link's opening words when it cannot link (it stands in for markers seen in both mirrors)
-_NOT_SHARED = f"too few markers are seen in both mirrors (under {MIN_BOTH_MIRROR_SIGHTINGS} sightings)"
 MIN_BOTH_MIRROR_MARKERS = 3     # ... and fewer markers: one wrongly paired marker would set the ratio (mirror35,
                                 # one marker's 15 sightings: 1.22 where the truth is 1.00), so head motion links them
 MOTION_FRAMES = 300      # head-motion link: the first frames of the clip it reads
@@ -55,12 +53,14 @@ MOTION_MIN_PAIRS = 5     # ... and the frame pairs it needs, each with markers h
 MOTION_MAX_ERROR = 0.005  # ... refused when its standard error exceeds 0.5 % (too little head motion)
 MOTION_MIN_SHARE = 0.005  # ... or when the head's translation between frames is under 0.5 % of its distance
                           # (the clips move 2-17 %; a still head moves 0)
-RIGID_SHARE = 0.5        # ... from each mirror's half of its markers that move most rigidly with the head: with the true
-                          # normals, over the 59 rendered clips it links (stop 57), 0.11 % off the truth on average and
-                          # 0.50 % at most with all markers, 0.04 % and 0.14 % with this half (0.04 / 0.05 / 0.06 % with
-                          # 1/3, 2/3, 4/5; weighting by residual 0.08-0.14 %)
 MOTION_MAX_SPREAD = 0.01  # ... or when the frame pairs' ratios spread by more than 1 % (0.1-0.4 % on the clips
                           # that link; 2.2 % on one with 20 markers per mirror, whose ratio came out 1.6 % off)
+RIGID_SHARE = 0.5         # the link rests on each mirror's half of its markers that move most rigidly with the
+                          # head: with the true normals, over the 59 rendered clips it links (stop 57), 0.11 % off
+                          # the truth on average and 0.50 % at most with all markers, 0.04 % and 0.14 % with this
+                          # half (0.04 / 0.05 / 0.06 % with 1/3, 2/3, 4/5; weighting by residual 0.08-0.14 %)
+#: the motion link's opening words when it cannot link (it stands in for markers seen in both mirrors)
+_NOT_SHARED = f"too few markers are seen in both mirrors (under {MIN_BOTH_MIRROR_SIGHTINGS} sightings)"
 
 
 @dataclass
@@ -278,7 +278,8 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     markers."""
     sub = det.window(0, min(frames, det.n_frames))
     F = sub.n_frames
-    if len(_frame_pairs(F)) < MOTION_MIN_PAIRS:
+    frame_pairs = _frame_pairs(F)
+    if len(frame_pairs) < MOTION_MIN_PAIRS:
         shortest = next(n for n in itertools.count(F) if len(_frame_pairs(n)) >= MOTION_MIN_PAIRS)
         raise DegenerateError(f"{_NOT_SHARED}, and a take of {F} frames is too short to relate the two mirrors' "
                               f"scales through the head's motion (that takes frame pairs 10 frames apart or more: "
@@ -287,7 +288,7 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     pos = _one_mirror_points(sub, camera, normals, ds)
     seen = [np.isfinite(P[..., 0]) for P in pos]
     pairs, in_common = [], []
-    for a, b in _frame_pairs(F):
+    for a, b in frame_pairs:
         common = [np.flatnonzero(s[a] & s[b]) for s in seen]
         in_common.append([len(c) for c in common])
         if min(len(c) for c in common) >= min_markers:
@@ -341,7 +342,8 @@ def link_mirror_scales_by_motion(det: ClipDetections, camera: Camera, normals, d
     if not (moved >= MOTION_MIN_SHARE and np.isfinite(error) and error <= MOTION_MAX_ERROR):
         raise DegenerateError(f"{_NOT_SHARED}, and the head moves too little in the first "
                               f"{F} frames to relate the two mirrors' scales through its motion (it moves "
-                              f"{100 * moved:.2f} % of its distance between frames, standard error {100 * error:.2f} %); turn the head during the take or give MIRRORS.json from "
+                              f"{100 * moved:.2f} % of its distance between frames, standard error "
+                              f"{100 * error:.2f} %); turn the head during the take or give MIRRORS.json from "
                               "`mirrorcap mirrors`")
     out = np.array(ds, float)
     out[1] /= ratio
